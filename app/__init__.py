@@ -1,0 +1,1 @@
+"""cogmap application layer: the command-line interface and the viser web app."""

@@ -1,0 +1,67 @@
+"""The ``cogmap`` command line: thin shells over library functions, one error handler.
+
+Each command lives in its own module ``app/cmd_<name>.py`` exposing ``add_parser(subparsers)``;
+the parser's ``func`` takes the parsed arguments and returns the exit code. Every expected
+failure is a :class:`cogmap_core.errors.CogmapError`, printed here as one line (no traceback)
+with its exit code (2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from cogmap_core import __version__
+from cogmap_core.errors import CogmapError
+
+# Modules app/cmd_<name>.py, in the order they appear in --help.
+COMMAND_MODULES: tuple[str, ...] = (
+    "app.cmd_serve",
+    "app.cmd_run",
+    "app.cmd_optimize",
+    "app.cmd_make_maze",
+    "app.cmd_dataset",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with every available sub-command."""
+    parser = argparse.ArgumentParser(
+        prog="cogmap",
+        description="Brain-inspired compact cognitive maps: SLAM on iRat-layout bags, "
+        "pose-graph optimisation, synthetic rat mazes and a live web app.",
+    )
+    parser.add_argument("--version", action="version", version=f"cogmap {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module_name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if exc.name == module_name:  # command not built yet
+                continue
+            raise
+        module.add_parser(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``cogmap`` command line; return the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except CogmapError as exc:
+        print(f"cogmap {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print(f"cogmap {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""Typed, validated parameters of the cognitive map (paper values as defaults)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
+
+from cogmap_core.errors import ParameterError
+
+# name -> (lower bound, lower bound inclusive?, upper bound, meaning); upper bound inclusive.
+_RANGES: dict[str, tuple[float, bool, float, str]] = {
+    "alpha": (0.0, True, 1e6, "weight of translation in the neighborhood field (1/m)"),
+    "beta": (0.0, True, 1e6, "weight of rotation in the neighborhood field (1/rad)"),
+    "delta": (1.0, False, 1e12, "neighborhood field threshold (g > delta adds a vertex)"),
+    "t_interval": (0.0, False, 1e9, "loop-closure cluster time-interval threshold (s)"),
+    "t_total": (0.0, False, 1e9, "loop-closure cluster total-time threshold (s)"),
+    "huber_scale": (0.0, False, 1e9, "Huber loss scale of the batch optimisation (m, rad)"),
+    "short_edge_threshold": (0.0, True, 1e9, "edges shorter than this are removed (m)"),
+    "integration_radius": (0.0, True, 1e9, "max distance of a revisit to merge it (m)"),
+    "integration_max_residual": (0.0, True, 1e9, "max loop-edge residual to merge a revisit"),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class MapParams:
+    """Parameters of the cognitive map.
+
+    Defaults are the paper's: alpha = beta = 10, delta = 3.746, T_interval = 2 s,
+    T_total = 100 s. The remaining ones the paper leaves open; the defaults suit iRat-scale mazes.
+
+    Attributes:
+        alpha: translation weight of the neighborhood field g(d, theta) = (1 + alpha d)(1 + beta |theta|).
+        beta: rotation weight of the neighborhood field.
+        delta: threshold; a proposed vertex is added only when g > delta (must be > 1, since g >= 1).
+        t_interval: a loop-closure edge joins the open cluster only if it comes less than
+            ``t_interval`` seconds after the previous loop-closure edge.
+        t_total: ... and no more than ``t_total`` seconds after the cluster's first edge.
+        huber_scale: scale of the Huber loss on every edge residual.
+        short_edge_threshold: after optimisation, edges shorter than this are contracted.
+        integration_radius: a revisiting vertex within this distance of the vertex it revisits
+            (after optimisation) is merged into it (scene integration).
+        integration_max_residual: ... provided the loop-closure edge between them converged,
+            i.e. its residual norm after optimisation is at most this (outliers are kept apart).
+    """
+
+    alpha: float = 10.0
+    beta: float = 10.0
+    delta: float = 3.746
+    t_interval: float = 2.0
+    t_total: float = 100.0
+    huber_scale: float = 0.1
+    short_edge_threshold: float = 0.05
+    integration_radius: float = 0.3
+    integration_max_residual: float = 0.1
+
+    def __post_init__(self) -> None:
+        """Reject values outside each parameter's valid range."""
+        for f in fields(self):
+            validate_parameter(f.name, getattr(self, f.name))
+
+    def with_changes(self, **changes: float) -> MapParams:
+        """Return a copy with some parameters changed (validated)."""
+        unknown = set(changes) - {f.name for f in fields(self)}
+        if unknown:
+            raise ParameterError(
+                f"unknown map parameter(s) {sorted(unknown)}; known: {[f.name for f in fields(self)]}"
+            )
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, float]:
+        """Plain dict of all parameters (for JSON)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> MapParams:
+        """Build from a dict, ignoring nothing: unknown keys are an error."""
+        return cls().with_changes(**values)
+
+
+def parameter_range(name: str) -> tuple[float, bool, float]:
+    """Valid range of a map parameter: (lower, lower inclusive, upper)."""
+    low, inclusive, high, _ = _RANGES[name]
+    return low, inclusive, high
+
+
+def validate_parameter(name: str, value: float) -> None:
+    """Raise :class:`ParameterError` (naming the valid range) if ``value`` is out of range."""
+    low, inclusive, high, meaning = _RANGES[name]
+    ok = isinstance(value, int | float) and math.isfinite(value)
+    if ok:
+        ok = (value >= low if inclusive else value > low) and value <= high
+    if not ok:
+        bracket = "[" if inclusive else "("
+        raise ParameterError(
+            f"{name}={value!r} is out of range: {meaning} must be in {bracket}{low:g}, {high:g}]"
+        )

@@ -1,0 +1,68 @@
+"""Small SE(2) helpers, vectorised over leading dimensions (poses are ``(..., 3)`` = x, y, theta)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def wrap_angle(angle: ArrayLike) -> FloatArray:
+    """Wrap angles to ``[-pi, pi)``, the range the paper constrains vertex headings to."""
+    a = np.asarray(angle, dtype=np.float64)
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def wrap_scalar(angle: float) -> float:
+    """Wrap one angle to ``[-pi, pi)`` (a fast path for plain floats)."""
+    return (angle + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """Compose poses: ``a (+) b``, i.e. pose ``b`` (given in frame ``a``) expressed in a's parent."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.float64)
+    out[..., 0] = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    out[..., 1] = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    out[..., 2] = wrap_angle(a[..., 2] + b[..., 2])
+    return out
+
+
+def inverse(a: ArrayLike) -> FloatArray:
+    """Invert poses: ``a (+) inverse(a) = identity``."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    out = np.empty_like(a)
+    out[..., 0] = -(c * a[..., 0] + s * a[..., 1])
+    out[..., 1] = s * a[..., 0] - c * a[..., 1]
+    out[..., 2] = wrap_angle(-a[..., 2])
+    return out
+
+
+def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """Relative pose of ``b`` in the frame of ``a``: ``inverse(a) (+) b``."""
+    return compose(inverse(a), b)
+
+
+def polar_to_relative(d: ArrayLike, heading_rad: ArrayLike, facing_rad: ArrayLike) -> FloatArray:
+    """Turn OpenRatSLAM link fields (d, heading_rad, facing_rad) into a relative pose (dx, dy, dtheta).
+
+    The paper's residual predicts ``x_j = x_i + d cos(theta_i + heading_rad)`` (likewise y) and
+    ``theta_j = theta_i + facing_rad``: the relative pose in frame ``i`` is therefore
+    ``(d cos heading, d sin heading, facing)``.
+    """
+    d = np.asarray(d, dtype=np.float64)
+    h = np.asarray(heading_rad, dtype=np.float64)
+    f = np.asarray(facing_rad, dtype=np.float64)
+    return np.stack([d * np.cos(h), d * np.sin(h), wrap_angle(f)], axis=-1)
+
+
+def relative_to_polar(rel: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Inverse of :func:`polar_to_relative`: ``(d, heading_rad, facing_rad)`` of relative poses."""
+    rel = np.asarray(rel, dtype=np.float64)
+    d = np.hypot(rel[..., 0], rel[..., 1])
+    heading = np.arctan2(rel[..., 1], rel[..., 0])
+    return d, heading, wrap_angle(rel[..., 2])
