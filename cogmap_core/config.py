@@ -30,9 +30,11 @@ class MapParams:
     T_total = 100 s. The remaining ones the paper leaves open; the defaults suit iRat-scale mazes.
 
     Attributes:
-        alpha: translation weight of the neighborhood field g(d, theta) = (1 + alpha d)(1 + beta |theta|).
+        alpha: translation weight of the neighborhood field
+            g(d, theta) = (1 + alpha d)(1 + beta |theta|).
         beta: rotation weight of the neighborhood field.
-        delta: threshold; a proposed vertex is added only when g > delta (must be > 1, since g >= 1).
+        delta: threshold; a proposed vertex is added only when g > delta (must be > 1, since
+            g >= 1).
         t_interval: a loop-closure edge joins the open cluster only if it comes less than
             ``t_interval`` seconds after the previous loop-closure edge.
         t_total: ... and no more than ``t_total`` seconds after the cluster's first edge.
@@ -42,6 +44,7 @@ class MapParams:
             (after optimisation) is merged into it (scene integration).
         integration_max_residual: ... provided the loop-closure edge between them converged,
             i.e. its residual norm after optimisation is at most this (outliers are kept apart).
+
     """
 
     alpha: float = 10.0
@@ -64,7 +67,8 @@ class MapParams:
         unknown = set(changes) - {f.name for f in fields(self)}
         if unknown:
             raise ParameterError(
-                f"unknown map parameter(s) {sorted(unknown)}; known: {[f.name for f in fields(self)]}"
+                f"unknown map parameter(s) {sorted(unknown)}; "
+                f"known: {[f.name for f in fields(self)]}"
             )
         return replace(self, **changes)
 

@@ -12,8 +12,14 @@ odometry into a time-ordered stream of four kinds of events. The cognitive map c
   the neighborhood field may decline it; the sequential edges are then merged.
 - :class:`LinkToVertex` -- a loop closure: link the current vertex to the existing vertex
   ``target``; ``relative_rad`` is the relative angle found by view-template matching.
-- :class:`SetCurrentVertex` -- the robot is now at vertex ``target`` (heading offset
-  ``relative_rad``); odometry accumulates from there.
+- :class:`SetCurrentVertex` -- the robot is now at vertex ``target``; odometry accumulates from
+  there.
+
+``relative_rad`` is always the robot's heading minus the target vertex's heading (the rotation
+view matching found between the current view and the view stored with the target): a link puts
+the target at the robot's dead-reckoned position with heading ``facing - relative_rad``, and
+setting the current vertex puts the robot at the target's position with heading
+``theta_target + relative_rad``.
 
 Vertex ids are the front end's experience ids: ``0, 1, 2, ...`` in creation order. All maps use
 these ids, so the same place has the same id in the standard and the compact map; a vertex the
@@ -29,7 +35,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True, slots=True)
 class Odometry:
-    """Motion since the previous odometry event: rotate by ``rotation``, then move ``translation``."""
+    """Motion since the previous odometry event: rotate by ``rotation``, then go ``translation``."""
 
     time: float
     translation: float

@@ -21,6 +21,7 @@ class Frame:
         rotation: heading change since the previous frame (rad), from ``twist.angular.z``.
         ground_truth: ``(x, y, theta)`` from ``/overhead/pose`` at this frame's time, or ``None``
             when the bag has no ground truth.
+
     """
 
     index: int

@@ -1,4 +1,4 @@
-"""Small SE(2) helpers, vectorised over leading dimensions (poses are ``(..., 3)`` = x, y, theta)."""
+"""Small SE(2) helpers, vectorised over leading dimensions (poses ``(..., 3)``: x, y, theta)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ def wrap_scalar(angle: float) -> float:
 
 
 def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:
-    """Compose poses: ``a (+) b``, i.e. pose ``b`` (given in frame ``a``) expressed in a's parent."""
+    """Compose poses: ``a (+) b``, pose ``b`` (given in frame ``a``) expressed in a's parent."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
@@ -48,7 +48,7 @@ def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
 
 
 def polar_to_relative(d: ArrayLike, heading_rad: ArrayLike, facing_rad: ArrayLike) -> FloatArray:
-    """Turn OpenRatSLAM link fields (d, heading_rad, facing_rad) into a relative pose (dx, dy, dtheta).
+    """Turn OpenRatSLAM link fields (d, heading_rad, facing_rad) into relative poses.
 
     The paper's residual predicts ``x_j = x_i + d cos(theta_i + heading_rad)`` (likewise y) and
     ``theta_j = theta_i + facing_rad``: the relative pose in frame ``i`` is therefore
