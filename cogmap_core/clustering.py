@@ -1,0 +1,93 @@
+"""Loop-closure clustering by time (paper, section "Clustering Loop Closure Edges").
+
+Loop-closure edges are grouped incrementally. The first edge opens a cluster at its time
+``t_start``. A later edge at time ``t`` joins the open cluster when it comes less than
+``T_interval`` after the previous loop-closure edge (``t - t_prev < T_interval``) and no more than
+``T_total`` after the cluster's first edge (``t - t_start <= T_total``); otherwise it opens a new
+cluster. A cluster is *closed* -- and the map optimised once -- as soon as data time shows that no
+further edge can join it: at the first event with ``t - t_prev >= T_interval`` or
+``t - t_start > T_total``, and at the end of the data.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(slots=True)
+class Cluster:
+    """One cluster of loop-closure edges.
+
+    Attributes:
+        cluster_id: 0, 1, 2, ... in creation order.
+        start_time: time of the first edge.
+        last_time: time of the latest edge.
+        edge_count: number of loop-closure edges in the cluster.
+        closed_time: data time at which the cluster was closed (None while open).
+
+    """
+
+    cluster_id: int
+    start_time: float
+    last_time: float
+    edge_count: int = 1
+    closed_time: float | None = None
+
+
+@dataclass(slots=True)
+class LoopClosureClusterer:
+    """Incremental time-based clustering of loop-closure edges.
+
+    Use :meth:`due` before handling an event at time ``t`` (it closes the open cluster if no edge
+    can join it any more) and :meth:`add_edge` for each loop-closure edge.
+    """
+
+    t_interval: float
+    t_total: float
+    clusters: list[Cluster] = field(default_factory=list)
+    _open: Cluster | None = None
+
+    @property
+    def open_cluster(self) -> Cluster | None:
+        """The cluster still accepting edges, if any."""
+        return self._open
+
+    def _accepts(self, cluster: Cluster, time: float) -> bool:
+        return (time - cluster.last_time < self.t_interval) and (
+            time - cluster.start_time <= self.t_total
+        )
+
+    def due(self, time: float) -> Cluster | None:
+        """Close and return the open cluster if an edge at ``time`` could no longer join it."""
+        cluster = self._open
+        if cluster is not None and not self._accepts(cluster, time):
+            cluster.closed_time = time
+            self._open = None
+            return cluster
+        return None
+
+    def add_edge(self, time: float) -> tuple[int, Cluster | None]:
+        """Assign a loop-closure edge at ``time`` to a cluster.
+
+        Returns:
+            The cluster id of the edge, and the cluster this edge caused to close (if any).
+
+        """
+        closed = self.due(time)
+        cluster = self._open
+        if cluster is None:
+            cluster = Cluster(cluster_id=len(self.clusters), start_time=time, last_time=time)
+            self.clusters.append(cluster)
+            self._open = cluster
+        else:
+            cluster.last_time = time
+            cluster.edge_count += 1
+        return cluster.cluster_id, closed
+
+    def finish(self, time: float) -> Cluster | None:
+        """Close the open cluster at the end of the data."""
+        cluster = self._open
+        if cluster is not None:
+            cluster.closed_time = time
+            self._open = None
+        return cluster

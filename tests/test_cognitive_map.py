@@ -1,0 +1,470 @@
+"""The cognitive map: events, neighborhood fields, clustering, optimisation, scene integration,
+short edges, modes and size history (paper, section Method)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode, MapSet, neighborhood_field
+from cogmap_core.config import MapParams
+from cogmap_core.errors import EventError, ParameterError
+from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
+from cogmap_core.geometry import between, compose
+from tests.mapscript import Script
+
+HALF_PI = math.pi / 2
+
+
+def edges_of(cmap: CognitiveMap) -> set[tuple[int, int]]:
+    snap = cmap.snapshot()
+    return set(zip(snap.edge_from.tolist(), snap.edge_to.tolist(), strict=True))
+
+
+def edge_rel(cmap: CognitiveMap, a: int, b: int, kind: EdgeKind | None = None) -> np.ndarray:
+    snap = cmap.snapshot()
+    k = np.flatnonzero(
+        (snap.edge_from == a) & (snap.edge_to == b) & ((snap.edge_kind == kind) | (kind is None))
+    )
+    assert k.size == 1
+    return snap.edge_rel[k[0]]
+
+
+def build(
+    mode: str, script: Script, params: MapParams | None = None, finish: bool = True
+) -> CognitiveMap:
+    cmap = CognitiveMap(mode, params)
+    cmap.apply_all(script.events)
+    if finish:
+        cmap.finish()
+    return cmap
+
+
+# ------------------------------------------------------------------------------------------
+# events and storage
+# ------------------------------------------------------------------------------------------
+
+
+def test_standard_map_is_exactly_what_the_events_build():
+    s = Script()
+    s.create()
+    s.move(0.1)
+    s.create()
+    s.move(0.2, 0.5)
+    s.create()
+    s.link(0)
+    cmap = build("standard", s, finish=False)
+    snap = cmap.snapshot()
+    assert snap.vertex_ids.tolist() == [0, 1, 2]
+    np.testing.assert_allclose(snap.poses, [s.truth[0], s.truth[1], s.truth[2]], atol=1e-12)
+    assert snap.edge_kind.tolist() == [
+        EdgeKind.SEQUENTIAL,
+        EdgeKind.SEQUENTIAL,
+        EdgeKind.LOOP_CLOSURE,
+    ]
+    assert snap.edge_from.tolist() == [0, 1, 2] and snap.edge_to.tolist() == [1, 2, 0]
+    # OpenRatSLAM link fields: d, heading_rad, facing_rad relative to the source vertex
+    assert snap.edge_d[1] == pytest.approx(0.2)
+    assert snap.edge_heading_rad[1] == pytest.approx(0.5)
+    assert snap.edge_facing_rad[1] == pytest.approx(0.5)
+    # a link puts the target at the robot's position, heading = facing - relative_rad
+    np.testing.assert_allclose(snap.edge_rel[2], [0.0, 0.0, -0.5], atol=1e-12)
+    assert snap.edge_cluster.tolist() == [-1, -1, 0]
+    assert snap.vertex_time.tolist() == [0.0, pytest.approx(0.1), pytest.approx(0.2)]
+    assert snap.vertex_view.tolist() == [0, 1, 2]
+
+
+@pytest.mark.parametrize(
+    ("events", "message"),
+    [
+        ([CreateVertex(0.0, 1, 0)], "next vertex id must be 0"),
+        ([CreateVertex(1.0, 0, 0), Odometry(0.5, 0.1, 0.0)], "earlier than the previous event"),
+        ([CreateVertex(0.0, 0, 0), LinkToVertex(0.1, 3)], "vertex 3 does not exist"),
+        ([LinkToVertex(0.0, 0)], "before any vertex"),
+        ([CreateVertex(0.0, 0, 0), Odometry(0.1, float("nan"), 0.0)], "not finite"),
+        ([CreateVertex(0.0, 0, 0), SetCurrentVertex(0.1, 0, float("inf"))], "non-finite"),
+        ([Odometry(float("nan"), 0.0, 0.0)], "not finite"),
+    ],
+)
+def test_contract_violations_are_clear_errors(events, message):
+    cmap = CognitiveMap("standard")
+    with pytest.raises(EventError, match=message):
+        cmap.apply_all(events)
+
+
+def test_hundred_thousand_vertices_stay_cheap():
+    cmap = CognitiveMap("standard")
+    n = 100_000
+    for k in range(n):
+        cmap.apply(Odometry(k * 0.05, 0.01, 0.0))
+        cmap.apply(CreateVertex(k * 0.05, k, k))
+    assert (cmap.num_vertices, cmap.num_edges) == (n, n - 1)
+    snap = cmap.snapshot()
+    assert snap.poses.shape == (n, 3)
+    assert snap.poses[-1, 0] == pytest.approx(0.01 * n)  # odometry before vertex 0 counts
+    storage = sum(a.nbytes for a in vars(cmap).values() if isinstance(a, np.ndarray))
+    assert storage < 300 * n  # flat arrays: a few hundred bytes per vertex and edge at most
+
+
+# ------------------------------------------------------------------------------------------
+# neighborhood fields
+# ------------------------------------------------------------------------------------------
+
+
+def test_neighborhood_field_formula():
+    assert neighborhood_field(0.0, 0.0, 10, 10) == 1.0
+    assert neighborhood_field(0.2746, 0.0, 10, 10) == pytest.approx(3.746)
+    assert neighborhood_field(0.1, -0.1, 10, 10) == pytest.approx(4.0)  # |theta|
+    assert neighborhood_field(0.5, 0.2, 2, 3) == pytest.approx(2.0 * 1.6)
+
+
+def straight_line(n: int = 10, step: float = 0.1) -> Script:
+    s = Script()
+    s.create()
+    for _ in range(n):
+        s.move(step)
+        s.create()
+    return s
+
+
+def test_compact_merges_consecutive_sequential_edges():
+    s = straight_line()
+    compact = build("compact", s, finish=False)
+    standard = build("standard", s, finish=False)
+    assert standard.snapshot().vertex_ids.tolist() == list(range(11))
+    assert len(edges_of(standard)) == 10
+    # g(0.1)=2, g(0.2)=3 <= 3.746 declined; g(0.3)=4 > 3.746 added: every third proposal.
+    assert compact.snapshot().vertex_ids.tolist() == [0, 3, 6, 9]
+    assert edges_of(compact) == {(0, 3), (3, 6), (6, 9)}
+    for a, b in [(0, 3), (3, 6), (6, 9)]:
+        np.testing.assert_allclose(edge_rel(compact, a, b), [0.3, 0.0, 0.0], atol=1e-12)
+    assert compact.declined_vertices == 7
+    # declined vertices are aliases of the vertex that absorbed them
+    target, offset = compact.resolve(10)
+    assert target == 9
+    np.testing.assert_allclose(offset, [0.1, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(compact.vertex_pose(5), [0.5, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(compact.current_pose(), [1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_rotation_alone_can_add_a_vertex():
+    s = Script()
+    s.create()
+    for _ in range(4):
+        s.move(0.0, 0.1)
+        s.create()
+    compact = build("compact", s, finish=False)
+    assert compact.snapshot().vertex_ids.tolist() == [0, 3]  # g = 1 + 10 * 0.3 = 4 > 3.746
+    np.testing.assert_allclose(edge_rel(compact, 0, 3), [0.0, 0.0, 0.3], atol=1e-12)
+
+
+def test_alpha_beta_delta_settable_at_any_time():
+    s = straight_line(6)
+    cmap = CognitiveMap("compact")
+    cmap.apply_all(s.events[:7])  # vertices 0..3 proposed -> 0 and 3 kept
+    cmap.set_params(cmap.params.with_changes(delta=1.5))  # now g(0.1) = 2 > 1.5
+    cmap.apply_all(s.events[7:])
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 3, 4, 5, 6]
+    cmap2 = CognitiveMap("compact", MapParams(alpha=1.0, beta=0.0))  # g(d) = 1 + d
+    cmap2.apply_all(s.events)
+    assert cmap2.snapshot().vertex_ids.tolist() == [0]
+
+
+def test_links_and_set_current_through_aliases():
+    s = straight_line(10)
+    cmap = build("compact", s, finish=False)
+    # "you are at experience 4" (declined: 0.1 m past vertex 3)
+    cmap.apply(SetCurrentVertex(2.0, 4, 0.0))
+    assert cmap.current_vertex == 3
+    np.testing.assert_allclose(cmap.current_pose(), [0.4, 0.0, 0.0], atol=1e-12)
+    cmap.apply(Odometry(2.1, 0.1, 0.0))
+    cmap.apply(CreateVertex(2.1, 11, 11))  # 0.2 m from vertex 3: declined
+    np.testing.assert_allclose(cmap.vertex_pose(11), [0.5, 0.0, 0.0], atol=1e-12)
+    # loop closure to experience 8 (alias of 6 at +0.2 m), relative angle 0.25
+    cmap.apply(LinkToVertex(2.2, 8, 0.25))
+    expected = compose([0.2, 0.0, -0.25], [-0.2, 0.0, 0.0])  # (accum, facing - rel) (+) offset^-1
+    np.testing.assert_allclose(edge_rel(cmap, 3, 6, EdgeKind.LOOP_CLOSURE), expected, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------
+# clustering and optimisation inside the map
+# ------------------------------------------------------------------------------------------
+
+
+def square_laps(laps: int, noise: float = 0.0, seed: int = 0) -> Script:
+    """Drive a 1.2 m square; a vertex every 0.3 m (0.3 s); each revisit links to lap 1's vertex.
+
+    A lap proposes 16 vertices and takes 6 s; ``noise`` scales odometry noise and bias.
+    """
+    rng = np.random.default_rng(seed)
+    s = Script()
+    first_lap: list[int] = []
+    s.create()
+    first_lap.append(0)
+    for lap in range(laps):
+        for side in range(4):
+            for step in range(4):
+                for _ in range(3):  # 0.3 m in three odometry steps
+                    md = 0.1 * (1 + 0.05 * noise * rng.standard_normal()) + 0.003 * noise
+                    mr = noise * (0.01 * rng.standard_normal() + 0.006)
+                    s.move(0.1, 0.0, measured=(md, mr))
+                corner = step == 3
+                if corner:
+                    for _ in range(3):
+                        s.move(0.0, HALF_PI / 3, measured=(0.0, HALF_PI / 3 * (1 + noise * 0.05)))
+                index = side * 4 + step + 1
+                if lap == 0 and index < 16:
+                    first_lap.append(s.create())
+                else:
+                    old = first_lap[index % 16]
+                    s.create()
+                    s.link(old)
+    s.wait(3.0)
+    return s
+
+
+def test_one_optimisation_per_cluster_and_none_for_sequential_edges():
+    s = straight_line(20)
+    cmap = build("standard", s)
+    assert cmap.optimizations == [] and cmap.clusters == []
+    s = square_laps(3)
+    cmap = build("standard", s)
+    # links come every 0.3-0.6 s (< T_interval = 2 s) and within 100 s: a single cluster
+    assert len(cmap.clusters) == 1
+    assert len(cmap.optimizations) == 1
+    record = cmap.optimizations[0]
+    assert record.cluster_id == 0
+    assert record.time == pytest.approx(cmap.clusters[0].last_time + 2.0, abs=0.1 + 1e-9)
+    assert cmap.num_loop_edges == 1 + 16 * 2
+
+
+def test_clusters_split_on_interval_and_total_time_inside_the_map():
+    s = square_laps(3)
+    cmap = build("standard", s, MapParams(t_interval=0.25, t_total=100.0))
+    # links at least 0.3 s apart (>= 0.25 s): each its own cluster and optimisation
+    assert len(cmap.clusters) == 33 and len(cmap.optimizations) == 33
+    cmap = build("standard", s, MapParams(t_interval=2.0, t_total=2.0))
+    sizes = [c.edge_count for c in cmap.clusters]
+    assert sum(sizes) == 33 and max(sizes) <= 7  # 2 s of links at >= 0.3 s apart
+    assert len(cmap.clusters) >= 5
+    assert len(cmap.optimizations) == len(cmap.clusters)
+
+
+@pytest.mark.parametrize("mode", ["standard", "scene_integration", "compact"])
+def test_optimisation_corrects_drift(mode):
+    noisy = square_laps(4, noise=1.0, seed=3)
+    exact = square_laps(4, noise=0.0)
+    dead_reckoned = CognitiveMap(mode, MapParams(t_interval=1e9, t_total=1e9))
+    dead_reckoned.apply_all(noisy.events)
+    cmap = build(mode, noisy)
+    snap = cmap.snapshot()
+    truth = np.array([exact.truth[v] for v in snap.vertex_ids.tolist()])
+    err = np.hypot(*(snap.poses[:, :2] - truth[:, :2]).T).max()
+    before = dead_reckoned.snapshot()
+    truth_before = np.array([exact.truth[v] for v in before.vertex_ids.tolist()])
+    err_before = np.hypot(*(before.poses[:, :2] - truth_before[:, :2]).T).max()
+    assert err_before > 0.3
+    assert err < 0.1
+    np.testing.assert_array_equal(snap.poses[0], [0.0, 0.0, 0.0])  # first vertex fixed
+    assert (snap.poses[:, 2] >= -math.pi).all() and (snap.poses[:, 2] < math.pi).all()
+
+
+# ------------------------------------------------------------------------------------------
+# scene integration: cases A, B, C
+# ------------------------------------------------------------------------------------------
+
+
+def loop_back_to_vertex_1(extra_at_revisit: bool = False) -> Script:
+    """0 -> 1 -> 2 along x, then up, left and down onto vertex 1 (vertex 5 revisits 1)."""
+    s = Script()
+    s.create()  # 0 (0, 0)
+    s.move(0.3)
+    s.create()  # 1 (0.3, 0)
+    s.move(0.3)
+    s.create()  # 2 (0.6, 0)
+    s.move(0.3, HALF_PI)
+    s.create()  # 3 (0.6, 0.3)
+    s.move(0.3, HALF_PI)
+    s.create()  # 4 (0.3, 0.3)
+    s.move(0.3, HALF_PI)
+    s.create()  # 5 = revisit of 1, heading -pi/2
+    s.link(1)
+    if extra_at_revisit:
+        s.move(0.0, 0.2)
+        s.create()  # 6: another revisit of 1 (turned on the spot)
+        s.link(1)
+    s.move(0.3)
+    s.create()  # leaves the revisited place
+    return s
+
+
+def test_scene_integration_case_a():
+    s = loop_back_to_vertex_1()
+    standard = build("standard", s)
+    assert standard.snapshot().vertex_ids.tolist() == [0, 1, 2, 3, 4, 5, 6]
+    assert edges_of(standard) == {(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (5, 6), (5, 1)}
+    cmap = build("scene_integration", s)
+    # e_{i,i+1}, e_{i+1,i+2}, e_{i+1,k} (i = 4, k = 1) -> e_{i,k}, e_{k,i+2}
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 2, 3, 4, 6]
+    assert edges_of(cmap) == {(0, 1), (1, 2), (2, 3), (3, 4), (4, 1), (1, 6)}
+    assert cmap.num_loop_edges == 0 and cmap.integrated_vertices == 1
+    np.testing.assert_allclose(edge_rel(cmap, 4, 1), between(s.truth[4], s.truth[1]), atol=1e-9)
+    np.testing.assert_allclose(edge_rel(cmap, 1, 6), between(s.truth[1], s.truth[6]), atol=1e-9)
+    assert cmap.resolve(5)[0] == 1
+    snap = cmap.snapshot()
+    truth = np.array([s.truth[v] for v in snap.vertex_ids.tolist()])
+    np.testing.assert_allclose(snap.poses[:, :2], truth[:, :2], atol=1e-9)
+
+
+def test_scene_integration_case_b_several_vertices_onto_one():
+    s = loop_back_to_vertex_1(extra_at_revisit=True)
+    cmap = build("scene_integration", s)
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 2, 3, 4, 7]
+    assert edges_of(cmap) == {(0, 1), (1, 2), (2, 3), (3, 4), (4, 1), (1, 7)}
+    assert cmap.integrated_vertices == 2
+    np.testing.assert_allclose(edge_rel(cmap, 1, 7), between(s.truth[1], s.truth[7]), atol=1e-9)
+
+
+def test_scene_integration_case_c_redundant_vertices_and_edges_removed():
+    s = Script()
+    s.create()  # 0
+    s.move(0.3)
+    s.create()  # 1
+    s.move(0.3)
+    s.create()  # 2
+    s.move(-0.6)  # reverse back to the start (the front end then says: you are at 0)
+    s.set_current(0)
+    s.create()  # 3 revisits 0
+    s.link(0)
+    s.move(0.3)
+    s.create()  # 4 revisits 1
+    s.link(1)
+    s.move(0.3)
+    s.create()  # 5 revisits 2
+    s.link(2)
+    standard = build("standard", s)
+    assert standard.num_vertices == 6 and standard.num_edges == 8
+    cmap = build("scene_integration", s)
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 2]
+    assert edges_of(cmap) == {(0, 1), (1, 2)}
+    np.testing.assert_allclose(edge_rel(cmap, 0, 1), [0.3, 0, 0], atol=1e-12)  # originals kept
+    assert cmap.integrated_vertices == 3
+
+
+def test_outlier_loop_closure_is_not_integrated():
+    s = loop_back_to_vertex_1()
+    # a false loop closure from the last vertex to vertex 3, 0.67 m away
+    s.events.append(LinkToVertex(s.t, 3, 0.0))
+    cmap = build("scene_integration", s)
+    assert 5 not in cmap.snapshot().vertex_ids.tolist()  # the true revisit is merged
+    assert 6 in cmap.snapshot().vertex_ids.tolist() and (6, 3) in edges_of(cmap)
+    assert cmap.num_loop_edges == 1
+
+
+# ------------------------------------------------------------------------------------------
+# short edges: cases A, B, C
+# ------------------------------------------------------------------------------------------
+
+KEEP_ALL = MapParams(alpha=1e6, beta=1e6, integration_radius=0.0, short_edge_threshold=0.05)
+
+
+def short_edge_script(parallel: bool, existing_i_to_i2: bool) -> Script:
+    s = Script()
+    s.create()  # i = 0
+    s.move(0.3)
+    s.create()  # i+1 = 1
+    s.move(0.01)
+    s.create()  # i+2 = 2, 1 cm from 1
+    if parallel:  # a second constraint between e_{i+1} and e_{i+2}
+        s.move(-0.01)
+        s.link(1)
+        s.move(0.01)
+    if existing_i_to_i2:  # and a constraint between e_i and e_{i+2}
+        s.move(-0.31)
+        s.link(0)
+        s.move(0.31)
+    s.move(0.3)
+    s.create()  # 3
+    return s
+
+
+def test_short_edges_case_a_merge_into_one_edge():
+    s = short_edge_script(parallel=False, existing_i_to_i2=False)
+    cmap = build("compact", s, KEEP_ALL, finish=False)
+    assert cmap.num_vertices == 4
+    cmap.optimize_now()
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 2, 3]
+    assert edges_of(cmap) == {(0, 2), (2, 3)}
+    np.testing.assert_allclose(edge_rel(cmap, 0, 2), [0.31, 0, 0], atol=1e-9)
+    assert cmap.short_edge_vertices == 1 and cmap.resolve(1)[0] == 2
+
+
+def test_short_edges_case_b_multiple_constraints():
+    s = short_edge_script(parallel=True, existing_i_to_i2=False)
+    cmap = build("compact", s, KEEP_ALL, finish=False)
+    assert edges_of(cmap) == {(0, 1), (1, 2), (2, 1), (2, 3)}
+    cmap.optimize_now()
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 2, 3]
+    assert edges_of(cmap) == {(0, 2), (2, 3)}
+    np.testing.assert_allclose(edge_rel(cmap, 0, 2), [0.31, 0, 0], atol=1e-9)
+
+
+def test_short_edges_case_c_edges_just_removed():
+    s = short_edge_script(parallel=True, existing_i_to_i2=True)
+    cmap = build("compact", s, KEEP_ALL, finish=False)
+    assert edges_of(cmap) == {(0, 1), (1, 2), (2, 1), (2, 0), (2, 3)}
+    cmap.optimize_now()
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 2, 3]
+    assert edges_of(cmap) == {(2, 0), (2, 3)}  # e_{i,i+1}, e_{i+1,i+2} and e_{i+1} removed
+    np.testing.assert_allclose(edge_rel(cmap, 2, 0), [-0.31, 0, 0], atol=1e-9)
+
+
+def test_first_vertex_is_never_removed_by_short_edges():
+    s = Script()
+    s.create()
+    s.move(0.01)
+    s.create()
+    s.move(0.3)
+    s.create()
+    cmap = build("compact", s, KEEP_ALL, finish=False)
+    cmap.optimize_now()
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 2]
+
+
+# ------------------------------------------------------------------------------------------
+# modes and history
+# ------------------------------------------------------------------------------------------
+
+
+def test_three_modes_from_one_stream_and_size_history():
+    s = square_laps(5, noise=0.5, seed=1)
+    maps = MapSet()
+    maps.apply_all(s.events)
+    maps.finish()
+    standard, integrated, compact = (maps[m] for m in MapMode)
+    assert standard.num_vertices == 1 + 16 * 5  # every proposal kept
+    assert standard.num_loop_edges == 1 + 16 * 4
+    assert integrated.num_vertices == 16  # every revisit merged onto lap 1
+    assert integrated.num_loop_edges == 0
+    assert compact.num_vertices <= integrated.num_vertices
+    assert compact.num_vertices >= 4  # the square's corners survive
+    for cmap in (standard, integrated, compact):
+        times, vertices, edges = cmap.size_history()
+        assert (np.diff(times) > 0).all()
+        assert vertices[-1] == cmap.num_vertices and edges[-1] == cmap.num_edges
+        assert times[0] == 0.0 and vertices[0] == 1
+    t_std, v_std, _ = standard.size_history()
+    assert (np.diff(v_std) >= 0).all()  # the standard map only grows
+
+
+def test_parameters_are_validated_with_ranges():
+    with pytest.raises(ParameterError, match=r"delta=1.0 is out of range.*\(1, "):
+        MapParams(delta=1.0)
+    with pytest.raises(ParameterError, match="alpha=-1"):
+        MapParams(alpha=-1)
+    with pytest.raises(ParameterError, match="t_interval=0"):
+        MapParams(t_interval=0)
+    with pytest.raises(ParameterError, match="unknown map parameter"):
+        MapParams().with_changes(gamma=1.0)
