@@ -1,0 +1,285 @@
+"""The headless pipeline: a bag through the front end into the three maps, and a report folder.
+
+``HeadlessPipeline(...).run()`` reads as the list of steps it performs; the result object holds
+everything written to the run folder.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shutil
+import time as wallclock
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.plots import map_figure, save_png, size_figure
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.datasets import BagReader, open_bag
+from cogmap_core.errors import CogmapError, InputFileError
+from cogmap_core.evaluation import align_rigid_2d
+from cogmap_core.frontend import FrontEndConfig
+from cogmap_core.g2o import write_g2o
+from cogmap_core.slam import SlamSession, optimisation_summary
+
+MAP_ORDER: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+ProgressCallback = Callable[[int, int, float], None]
+
+
+@dataclass(frozen=True, slots=True)
+class RunOptions:
+    """Everything that defines a headless run besides the bag."""
+
+    params: MapParams = field(default_factory=MapParams)
+    frontend: FrontEndConfig = field(default_factory=FrontEndConfig)
+    image_scale: int = 4
+    force: bool = False
+
+
+@dataclass
+class RunResult:
+    """The report of one run (also written as ``summary.json``)."""
+
+    summary: dict[str, Any]
+    out_dir: Path
+    files: list[Path]
+
+    def table(self) -> str:
+        """A compact one-line-per-map summary table."""
+        lines = [
+            f"{'map':18} {'vertices':>8} {'edges':>7} {'loops':>6} {'clusters':>8} "
+            f"{'optims':>6} {'opt s':>7} {'ATE m':>7}"
+        ]
+        for name, m in self.summary["maps"].items():
+            ate = "-" if m["ate_m"] is None else f"{m['ate_m']:.3f}"
+            lines.append(
+                f"{name:18} {m['vertices']:8d} {m['edges']:7d} {m['loop_edges']:6d} "
+                f"{m['clusters']:8d} {m['optimizations']:6d} {m['optimize_wall_s']:7.2f} {ate:>7}"
+            )
+        s = self.summary
+        lc = s["loop_closures"]
+        precision = "-" if lc["precision"] is None else f"{lc['precision']:.3f}"
+        lines.append(
+            f"{s['frames']} frames, {s['data_duration_s']:.1f} s of data in {s['wall_s']:.1f} s "
+            f"({s['realtime_factor']:.1f}x real time); loop closures {lc['total']} "
+            f"(precision {precision})"
+        )
+        return "\n".join(lines)
+
+
+def prepare_out_dir(out_dir: Path, force: bool) -> None:
+    """Create ``out_dir``; refuse an existing non-empty one unless ``force``."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputFileError(f"{out_dir} exists and is not a directory; choose another --out")
+    if out_dir.is_dir() and any(out_dir.iterdir()):
+        if not force:
+            raise InputFileError(
+                f"{out_dir} is not empty; choose another --out or pass --force to overwrite it"
+            )
+        for child in out_dir.iterdir():
+            if child.is_dir() and not child.is_symlink():
+                shutil.rmtree(child)
+            else:
+                child.unlink()
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+
+class HeadlessPipeline:
+    """Process a whole bag once and write the report folder."""
+
+    def __init__(
+        self,
+        bag: Path,
+        out_dir: Path,
+        options: RunOptions | None = None,
+        progress: ProgressCallback | None = None,
+    ) -> None:
+        """Set up a run of ``bag`` into ``out_dir``."""
+        self.bag = Path(bag)
+        self.out_dir = Path(out_dir)
+        self.options = options or RunOptions()
+        self.progress = progress
+        self.session = SlamSession(self.options.params, self.options.frontend)
+        self.files: list[Path] = []
+
+    def run(self) -> RunResult:
+        """Open the bag, process every frame, finish the maps, evaluate, write the report."""
+        reader = open_bag(self.bag, image_scale=self.options.image_scale)
+        prepare_out_dir(self.out_dir, self.options.force)
+        started = wallclock.perf_counter()
+        first, last = self._process_frames(reader)
+        self.session.finish()
+        wall = wallclock.perf_counter() - started
+        summary = self._summary(reader, first, last, wall)
+        self._write_config()
+        self._write_summary(summary)
+        self._write_sizes()
+        self._write_maps()
+        self._write_trajectories()
+        self._write_figures(last)
+        return RunResult(summary, self.out_dir, list(self.files))
+
+    # ------------------------------------------------------------------ steps
+    def _process_frames(self, reader: BagReader) -> tuple[float, float]:
+        first = last = math.nan
+        total = reader.info.frame_count
+        for frame in reader.frames():
+            if math.isnan(first):
+                first = frame.time
+            last = frame.time
+            self.session.process(frame)
+            if self.progress is not None:
+                self.progress(frame.index + 1, total, frame.time)
+        if math.isnan(first):
+            raise InputFileError(f"{self.bag}: no decodable camera frame; nothing to map")
+        self.counters = reader.counters
+        return first, last
+
+    def _summary(self, reader: BagReader, first: float, last: float, wall: float) -> dict[str, Any]:
+        session = self.session
+        duration = max(last - first, 0.0)
+        maps: dict[str, Any] = {}
+        for mode in MAP_ORDER:
+            cmap = session.maps[mode]
+            entry: dict[str, Any] = optimisation_summary(cmap)
+            ate = session.ate(cmap)
+            entry["ate_m"] = None if ate is None else round(ate, 6)
+            maps[mode.value] = entry
+        score = session.loop_closure_score()
+        if score is None:
+            total = sum(1 for e in session.log.events if type(e).__name__ == "LinkToVertex")
+            loops = {"total": total, "true": None, "false": None, "precision": None}
+        else:
+            loops = {
+                "total": score.total,
+                "true": score.true,
+                "false": score.false,
+                "precision": score.precision,
+            }
+        p = session.params
+        return {
+            "dataset": str(self.bag),
+            "frames": session.log.frames,
+            "data_duration_s": round(duration, 6),
+            "wall_s": round(wall, 6),
+            "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
+            "params": {
+                "alpha": p.alpha,
+                "beta": p.beta,
+                "delta": p.delta,
+                "t_interval": p.t_interval,
+                "t_total": p.t_total,
+            },
+            "maps": maps,
+            "loop_closures": loops,
+            "read_warnings": {
+                k: v for k, v in asdict(self.counters).items() if k != "frames" and v
+            },
+        }
+
+    def _write_json(self, name: str, payload: dict[str, Any]) -> None:
+        path = self.out_dir / name
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(payload, indent=2) + "\n")
+        os.replace(tmp, path)
+        self.files.append(path)
+
+    def _write_config(self) -> None:
+        self._write_json(
+            "config.json",
+            {
+                "dataset": str(self.bag),
+                "image_scale": self.options.image_scale,
+                "map": self.options.params.to_dict(),
+                "frontend": self.options.frontend.to_dict(),
+            },
+        )
+
+    def _write_summary(self, summary: dict[str, Any]) -> None:
+        self._write_json("summary.json", summary)
+
+    def _write_sizes(self) -> None:
+        """sizes.csv: time and the vertices/edges of each map, on the union of change times."""
+        histories = {m: self.session.maps[m].size_history() for m in MAP_ORDER}
+        times = np.unique(np.concatenate([h[0] for h in histories.values()]))
+        path = self.out_dir / "sizes.csv"
+        with path.open("w", newline="") as handle:
+            writer = csv.writer(handle)
+            header = ["time"]
+            for m in MAP_ORDER:
+                header += [f"{m.value}_vertices", f"{m.value}_edges"]
+            writer.writerow(header)
+            columns = []
+            for m in MAP_ORDER:
+                t, v, e = histories[m]
+                idx = np.searchsorted(t, times, side="right") - 1
+                columns.append(np.where(idx >= 0, v[np.maximum(idx, 0)], 0))
+                columns.append(np.where(idx >= 0, e[np.maximum(idx, 0)], 0))
+            for row in range(times.size):
+                writer.writerow([f"{times[row]:.6f}"] + [int(c[row]) for c in columns])
+        self.files.append(path)
+
+    def _write_maps(self) -> None:
+        for mode in MAP_ORDER:
+            path = self.out_dir / f"{mode.value}.g2o"
+            write_g2o(self.session.maps[mode].to_pose_graph(), path)
+            self.files.append(path)
+
+    def _write_trajectories(self) -> None:
+        """TUM files for evo: the standard map's vertices, and the ground truth when known."""
+        standard = self.session.maps[MapMode.STANDARD].snapshot()
+        order = np.argsort(standard.vertex_time, kind="stable")
+        self._write_tum("trajectory_tum.txt", standard.vertex_time[order], standard.poses[order])
+        truth = self.session.vertex_ground_truth(self.session.maps[MapMode.STANDARD])
+        if truth is not None:
+            self._write_tum("groundtruth_tum.txt", standard.vertex_time[order], truth[order])
+
+    def _write_tum(self, name: str, times: np.ndarray, poses: np.ndarray) -> None:
+        path = self.out_dir / name
+        with path.open("w") as handle:
+            handle.write("# timestamp tx ty tz qx qy qz qw\n")
+            for t, (x, y, th) in zip(times.tolist(), poses.tolist(), strict=True):
+                handle.write(
+                    f"{t:.6f} {x:.6f} {y:.6f} 0 0 0 {math.sin(th / 2):.9f} {math.cos(th / 2):.9f}\n"
+                )
+        self.files.append(path)
+
+    def _write_figures(self, end_time: float) -> None:
+        histories = {m.value: self.session.maps[m].size_history() for m in MAP_ORDER}
+        save_png(size_figure(histories, end_time), self.out_dir / "size.png")
+        self.files.append(self.out_dir / "size.png")
+        snaps = {m.value: self.session.maps[m].snapshot() for m in MAP_ORDER}
+        aligned: dict[str, np.ndarray] = {}
+        truth_path = None
+        if self.session.log.has_ground_truth():
+            truth_path = np.asarray(self.session.log.ground_truth)
+            for mode in MAP_ORDER:
+                cmap: CognitiveMap = self.session.maps[mode]
+                truth = self.session.vertex_ground_truth(cmap)
+                snap = snaps[mode.value]
+                if truth is not None and len(truth):
+                    tf = align_rigid_2d(snap.poses, truth)
+                    poses = snap.poses.copy()
+                    poses[:, :2] = tf.apply(snap.poses[:, :2])
+                    aligned[mode.value] = poses
+        save_png(map_figure(truth_path, snaps, aligned), self.out_dir / "map.png")
+        self.files.append(self.out_dir / "map.png")
+
+
+def run_headless(
+    bag: Path, out_dir: Path, options: RunOptions, progress: ProgressCallback | None = None
+) -> RunResult:
+    """Library entry of ``cogmap run``: process ``bag`` and write the report into ``out_dir``."""
+    try:
+        return HeadlessPipeline(bag, out_dir, options, progress).run()
+    except CogmapError:
+        raise
+    except MemoryError:
+        raise CogmapError("out of memory while processing the bag") from None
