@@ -34,12 +34,22 @@ from cogmap_core.clustering import Cluster, LoopClosureClusterer
 from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
-from cogmap_core.geometry import compose, inverse, relative_to_polar, wrap_angle, wrap_scalar
+from cogmap_core.geometry import (
+    compose,
+    compose_scalar,
+    inverse_scalar,
+    relative_to_polar,
+    wrap_angle,
+    wrap_scalar,
+)
 from cogmap_core.optimizer import EdgeModel, OptimizerOptions, edge_terms, optimize_pose_graph
 from cogmap_core.posegraph import PoseGraph
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float] | list[float]
+_ZERO: Pose = (0.0, 0.0, 0.0)
+TWO_PI = 2.0 * math.pi
 
 
 class MapMode(StrEnum):
@@ -141,6 +151,9 @@ class CognitiveMap:
     def __init__(self, mode: MapMode | str, params: MapParams | None = None) -> None:
         """Create an empty map."""
         self.mode = MapMode(mode)
+        self._declines = self.mode is MapMode.COMPACT  # neighborhood fields
+        self._integrates = self.mode is not MapMode.STANDARD  # scene integration
+        self._removes_short = self.mode is MapMode.COMPACT
         self.params = params or MapParams()
         self.clusterer = LoopClosureClusterer(self.params.t_interval, self.params.t_total)
         cap = 256
@@ -196,18 +209,25 @@ class CognitiveMap:
                 non-sequential new id, non-finite values, link before any vertex).
 
         """
-        t = float(event.time)
-        if not math.isfinite(t):
-            raise EventError(f"event time {event.time!r} is not finite; drop or fix the event")
-        if t < self._last_time:
+        t = event.time
+        if not t >= self._last_time:  # also catches NaN
+            if not math.isfinite(t):
+                raise EventError(f"event time {event.time!r} is not finite; drop or fix the event")
             raise EventError(
                 f"event time {t:.6f} s is earlier than the previous event "
                 f"({self._last_time:.6f} s); events must come in time order"
             )
+        if t == math.inf:
+            raise EventError(f"event time {event.time!r} is not finite; drop or fix the event")
         self._last_time = t
-        closed = self.clusterer.due(t)
-        if closed is not None:
-            self._optimize(closed.cluster_id, t)
+        if self.clusterer.open_cluster is not None:
+            closed = self.clusterer.due(t)
+            if closed is not None:
+                self._optimize(closed.cluster_id, t)
+                self._record_size(t)
+        if type(event) is Odometry:
+            self._on_odometry(event)
+            return  # odometry never changes the map's size
         if isinstance(event, Odometry):
             self._on_odometry(event)
         elif isinstance(event, CreateVertex):
@@ -247,16 +267,20 @@ class CognitiveMap:
         """Dead-reckoned robot pose: current vertex pose composed with the accumulated motion."""
         if self._current < 0:
             return np.array(self._accum)
-        return compose(self._pose[self._current], np.array(self._accum))
+        return np.array(compose_scalar(self._pose[self._current].tolist(), self._accum))
 
     def resolve(self, vertex_id: int) -> tuple[int, FloatArray]:
         """The live vertex standing for ``vertex_id`` and the pose of the latter in its frame."""
+        target, offset = self._resolve(vertex_id)
+        return target, np.array(offset)
+
+    def _resolve(self, vertex_id: int) -> tuple[int, list[float]]:
         if not 0 <= vertex_id < self._num_ids:
             raise EventError(
                 f"vertex {vertex_id} does not exist (known ids: 0..{self._num_ids - 1}); "
                 "the front end referred to a vertex it never created"
             )
-        return int(self._alias[vertex_id]), self._alias_offset[vertex_id].copy()
+        return int(self._alias[vertex_id]), self._alias_offset[vertex_id].tolist()
 
     def vertex_pose(self, vertex_id: int) -> FloatArray:
         """Current estimate of the pose of ``vertex_id`` (through its alias if removed)."""
@@ -313,16 +337,17 @@ class CognitiveMap:
     # ----------------------------------------------------------------------------------------
 
     def _on_odometry(self, event: Odometry) -> None:
-        trans, rot = float(event.translation), float(event.rotation)
+        trans, rot = event.translation, event.rotation
         if not (math.isfinite(trans) and math.isfinite(rot)):
             raise EventError(
                 f"odometry at {event.time:.3f} s is not finite "
                 f"(translation={trans}, rotation={rot}); fix or drop the message"
             )
         acc = self._accum
-        acc[2] = wrap_scalar(acc[2] + rot)
-        acc[0] += trans * math.cos(acc[2])
-        acc[1] += trans * math.sin(acc[2])
+        heading = (acc[2] + rot + math.pi) % TWO_PI - math.pi
+        acc[2] = heading
+        acc[0] += trans * math.cos(heading)
+        acc[1] += trans * math.sin(heading)
 
     def _on_create(self, event: CreateVertex) -> None:
         vid = int(event.vertex)
@@ -335,12 +360,12 @@ class CognitiveMap:
         self._num_ids += 1
         self._vtime[vid] = event.time
         self._view[vid] = int(event.view_template)
-        rel = np.array(self._accum)
+        rel = tuple(self._accum)
         if self._current < 0:
             self._add_vertex(vid, rel)
-            self._set_current(vid, np.zeros(3))
+            self._set_current(vid, _ZERO)
             return
-        if self.mode is MapMode.COMPACT:
+        if self._declines:
             d = math.hypot(rel[0], rel[1])
             g = neighborhood_field(d, rel[2], self.params.alpha, self.params.beta)
             if g <= self.params.delta:
@@ -349,19 +374,19 @@ class CognitiveMap:
                 self._alias_offset[vid] = rel
                 self.declined_vertices += 1
                 return
-        self._add_vertex(vid, compose(self._pose[self._current], rel))
+        self._add_vertex(vid, compose_scalar(self._pose[self._current].tolist(), rel))
         self._add_edge(self._current, vid, rel, event.time, EdgeKind.SEQUENTIAL, -1)
-        self._set_current(vid, np.zeros(3))
+        self._set_current(vid, _ZERO)
 
     def _on_link(self, event: LinkToVertex) -> None:
         if self._current < 0:
             raise EventError(f"LinkToVertex at {event.time:.3f} s before any vertex was created")
-        target, offset = self.resolve(int(event.target))
+        target, offset = self._resolve(int(event.target))
         if not math.isfinite(event.relative_rad):
             raise EventError(f"LinkToVertex at {event.time:.3f} s has a non-finite relative angle")
         acc = self._accum
-        to_experience = np.array([acc[0], acc[1], acc[2] - event.relative_rad])
-        rel = compose(to_experience, inverse(offset))
+        to_experience = (acc[0], acc[1], acc[2] - event.relative_rad)
+        rel = compose_scalar(to_experience, inverse_scalar(offset))
         if target == self._current:
             return  # the link closes on the vertex we are at (after merges): nothing to add
         cluster_id, closed = self.clusterer.add_edge(event.time)
@@ -370,13 +395,12 @@ class CognitiveMap:
         self._add_edge(self._current, target, rel, event.time, EdgeKind.LOOP_CLOSURE, cluster_id)
 
     def _on_set(self, event: SetCurrentVertex) -> None:
-        target, offset = self.resolve(int(event.target))
+        target, offset = self._resolve(int(event.target))
         if not math.isfinite(event.relative_rad):
             raise EventError(
                 f"SetCurrentVertex at {event.time:.3f} s has a non-finite relative angle"
             )
-        offset[2] = offset[2] + event.relative_rad
-        self._set_current(target, offset)
+        self._set_current(target, (offset[0], offset[1], offset[2] + event.relative_rad))
 
     # ----------------------------------------------------------------------------------------
     # storage
@@ -407,22 +431,20 @@ class CognitiveMap:
         self._ecluster = _grow(self._ecluster, new, fill=-1)
         self._ealive = _grow(self._ealive, new)
 
-    def _add_vertex(self, vid: int, pose: FloatArray) -> None:
-        self._pose[vid] = pose
-        self._pose[vid, 2] = wrap_scalar(float(pose[2]))
+    def _add_vertex(self, vid: int, pose: Pose) -> None:
+        self._pose[vid] = (pose[0], pose[1], wrap_scalar(pose[2]))
         self._alive[vid] = True
         self._alias[vid] = vid
         self._alias_offset[vid] = 0.0
         self.num_vertices += 1
 
     def _add_edge(
-        self, src: int, dst: int, rel: FloatArray, t: float, kind: EdgeKind, cluster: int
+        self, src: int, dst: int, rel: Pose, t: float, kind: EdgeKind, cluster: int
     ) -> int:
         k = self._num_edges_total
         self._ensure_edge_capacity(k + 1)
         self._efrom[k], self._eto[k] = src, dst
-        self._erel[k] = rel
-        self._erel[k, 2] = wrap_scalar(float(rel[2]))
+        self._erel[k] = (rel[0], rel[1], wrap_scalar(rel[2]))
         self._etime[k] = t
         self._ekind[k] = kind
         self._ecluster[k] = cluster
@@ -440,7 +462,7 @@ class CognitiveMap:
             if self._ekind[k] == EdgeKind.LOOP_CLOSURE:
                 self.num_loop_edges -= 1
 
-    def _set_current(self, vid: int, offset: FloatArray) -> None:
+    def _set_current(self, vid: int, offset: Pose) -> None:
         self._current = vid
         self._accum = [float(offset[0]), float(offset[1]), wrap_scalar(float(offset[2]))]
 
@@ -479,9 +501,9 @@ class CognitiveMap:
         wall = wallclock.perf_counter() - started
         self._pose[graph.vertex_ids] = result.poses
         integrated = short = 0
-        if self.mode is not MapMode.STANDARD:
+        if self._integrates:
             integrated = self._integrate_scenes()
-        if self.mode is MapMode.COMPACT:
+        if self._removes_short:
             short = self._remove_short_edges()
         record = OptimizationRecord(
             cluster_id=cluster_id,
@@ -522,8 +544,8 @@ class CognitiveMap:
             a, b = int(self._efrom[k]), int(self._eto[k])
             newer, older = (a, b) if a > b else (b, a)
             # pose of `newer` in the frame of `older`, from the loop-closure measurement
-            rel = self._erel[k]
-            offset = inverse(rel) if newer == a else rel.copy()
+            rel = self._erel[k].tolist()
+            offset = inverse_scalar(rel) if newer == a else tuple(rel)
             self._remove_edge(k)
             self._merge_vertex(newer, older, offset)
             removed += 1
@@ -547,11 +569,11 @@ class CognitiveMap:
                 return removed
             k = int(short[0])
             src, dst = int(self._efrom[k]), int(self._eto[k])
-            rel = self._erel[k].copy()
+            rel = tuple(self._erel[k].tolist())
             self._remove_edge(k)
             anchor = int(np.argmax(self._alive))  # the first live vertex is the map's anchor
             if src != anchor:  # the figure removes the edge's first vertex ...
-                self._merge_vertex(src, dst, inverse(rel))
+                self._merge_vertex(src, dst, inverse_scalar(rel))
             else:  # ... unless it anchors the map
                 self._merge_vertex(dst, src, rel)
             removed += 1
@@ -563,7 +585,7 @@ class CognitiveMap:
         )
         return np.sqrt(np.einsum("ka,ka->k", res, res))
 
-    def _merge_vertex(self, removed: int, kept: int, offset: FloatArray) -> None:
+    def _merge_vertex(self, removed: int, kept: int, offset: Pose) -> None:
         """Remove vertex ``removed`` and re-attach its edges to ``kept``.
 
         ``offset`` is the pose of ``removed`` in the frame of ``kept``. Edges that would join
@@ -576,15 +598,15 @@ class CognitiveMap:
             self._eto[live[self._efrom[live] == kept]].tolist()
             + self._efrom[live[self._eto[live] == kept]].tolist()
         )
-        inv_offset = inverse(offset)
+        inv_offset = inverse_scalar(offset)
         for k in incident.tolist():
             src, dst = int(self._efrom[k]), int(self._eto[k])
             if src == removed:
                 src = kept
-                self._erel[k] = compose(offset, self._erel[k])
+                self._erel[k] = compose_scalar(offset, self._erel[k].tolist())
             if dst == removed:
                 dst = kept
-                self._erel[k] = compose(self._erel[k], inv_offset)
+                self._erel[k] = compose_scalar(self._erel[k].tolist(), inv_offset)
             other = dst if src == kept else src
             if src == dst or other in neighbours_of_kept:
                 self._remove_edge(k)
@@ -594,12 +616,12 @@ class CognitiveMap:
         # Everything that stood for `removed` now stands for `kept`.
         n = self._num_ids
         moved = np.flatnonzero(self._alias[:n] == removed)
-        self._alias_offset[moved] = compose(offset, self._alias_offset[moved])
+        self._alias_offset[moved] = compose(np.array(offset), self._alias_offset[moved])
         self._alias[moved] = kept
         self._alive[removed] = False
         self.num_vertices -= 1
         if self._current == removed:
-            self._set_current(kept, compose(offset, np.array(self._accum)))
+            self._set_current(kept, compose_scalar(offset, self._accum))
 
 
 def _grow(array: NDArray, size: int, fill: float = 0) -> NDArray:

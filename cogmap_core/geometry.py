@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
+TWO_PI = 2.0 * math.pi
 
 
 def wrap_angle(angle: ArrayLike) -> FloatArray:
@@ -16,7 +19,25 @@ def wrap_angle(angle: ArrayLike) -> FloatArray:
 
 def wrap_scalar(angle: float) -> float:
     """Wrap one angle to ``[-pi, pi)`` (a fast path for plain floats)."""
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
+    return (angle + math.pi) % TWO_PI - math.pi
+
+
+def compose_scalar(
+    a: tuple[float, float, float] | list[float], b: tuple[float, float, float] | list[float]
+) -> tuple[float, float, float]:
+    """:func:`compose` for one pair of poses given as plain floats (no numpy overhead)."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (
+        a[0] + c * b[0] - s * b[1],
+        a[1] + s * b[0] + c * b[1],
+        (a[2] + b[2] + math.pi) % TWO_PI - math.pi,
+    )
+
+
+def inverse_scalar(a: tuple[float, float, float] | list[float]) -> tuple[float, float, float]:
+    """:func:`inverse` for one pose given as plain floats."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (-(c * a[0] + s * a[1]), s * a[0] - c * a[1], (math.pi - a[2]) % TWO_PI - math.pi)
 
 
 def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:
