@@ -1,0 +1,380 @@
+"""The pose cell network: a continuous attractor network over (x, y, theta), as in OpenRatSLAM.
+
+Dynamics per odometry update (OpenRatSLAM's ``PosecellNetwork::on_odo``):
+
+1. local excitation: circular convolution with a normalised 3-D Gaussian (7 cells, sigma 1);
+2. local inhibition: subtract the circular convolution of the result with a 5-cell, sigma 2
+   Gaussian;
+3. global inhibition: subtract a constant, clip at 0;
+4. normalisation to a total activity of 1;
+5. path integration: every theta layer ``k`` (heading ``k * 2 pi / n_th``) is shifted along its
+   heading by the translation in cells, with bilinear weights (OpenRatSLAM's four-quadrant
+   weights are exactly bilinear interpolation), then the whole network is shifted along theta by
+   the rotation in cells with linear weights; everything wraps around;
+6. the peak is decoded by population-vector averaging around the most active cell.
+
+Both Gaussian kernels are separable, so the convolutions are three 1-D circulant matrix products
+each. Cells are indexed ``[theta, y, x]``.
+
+:class:`PoseCellExperiences` adds the view-cell associations and OpenRatSLAM's experience-map
+actions (``on_view_template``, ``get_action``).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cogmap_core.frontend.config import FrontEndConfig
+
+FloatArray = NDArray[np.float64]
+
+
+def _gaussian_1d(dim: int, sigma: float) -> FloatArray:
+    """Normalised 1-D factor of OpenRatSLAM's 3-D kernel ``exp(-|d|^2 / (2 sigma^2))``."""
+    d = np.arange(dim) - dim // 2
+    k = np.exp(-(d * d) / (2.0 * sigma * sigma))
+    return k / k.sum()
+
+
+def _circulant(n: int, kernel: FloatArray) -> FloatArray:
+    """Matrix ``M`` with ``(v @ M)[i] = sum_d kernel[d] * v[(i - d + h) % n]``: circular spread."""
+    h = len(kernel) // 2
+    m = np.zeros((n, n))
+    src = np.arange(n)
+    for d, w in enumerate(kernel):
+        np.add.at(m, (src, (src + d - h) % n), w)
+    return m
+
+
+class PoseCellNetwork:
+    """The attractor dynamics of OpenRatSLAM's pose cells (no view or experience bookkeeping)."""
+
+    def __init__(self, config: FrontEndConfig) -> None:
+        """Start with all activity in the centre cell, as OpenRatSLAM does."""
+        self.config = config
+        self.n_xy = config.pc_dim_xy
+        self.n_th = config.pc_dim_th
+        self.th_size = 2.0 * math.pi / self.n_th
+        ex = _gaussian_1d(config.pc_w_e_dim, config.pc_w_e_var)
+        ix = _gaussian_1d(config.pc_w_i_dim, config.pc_w_i_var)
+        # Right-multiplication spreads along the last axis; the y and theta spreads use the
+        # transposes from the left.
+        self._e_xy = _circulant(self.n_xy, ex)
+        self._e_xy_t = np.ascontiguousarray(self._e_xy.T)
+        self._e_th_t = np.ascontiguousarray(_circulant(self.n_th, ex).T)
+        self._i_xy = _circulant(self.n_xy, ix)
+        self._i_xy_t = np.ascontiguousarray(self._i_xy.T)
+        self._i_th_t = np.ascontiguousarray(_circulant(self.n_th, ix).T)
+        headings = np.arange(self.n_th) * self.th_size
+        self._cos = np.cos(headings)
+        self._sin = np.sin(headings)
+        self._cos_sin = np.concatenate([self._cos, self._sin])
+        # _perm_xy[m] moves every element m cells forward along an axis: (v @ P[m])[i] = v[i - m].
+        self._perm_xy = _permutations(self.n_xy)
+        self._perm_th_t = np.ascontiguousarray(_permutations(self.n_th).transpose(0, 2, 1))
+        c = config.pc_cells_to_avg
+        self._avg_offsets = np.arange(-c, c + 1)
+        angle_xy = 2.0 * math.pi * np.arange(self.n_xy) / self.n_xy
+        angle_th = 2.0 * math.pi * np.arange(self.n_th) / self.n_th
+        self._sincos_xy = np.stack([np.sin(angle_xy), np.cos(angle_xy)], axis=1)
+        self._sincos_th = np.stack([np.sin(angle_th), np.cos(angle_th)], axis=1)
+        self.cells = np.zeros((self.n_th, self.n_xy, self.n_xy))
+        bx = by = self.n_xy // 2
+        bth = self.n_th // 2
+        self.cells[bth, by, bx] = 1.0
+        self.best: tuple[float, float, float] = (float(bx), float(by), float(bth))
+
+    # ---------------------------------------------------------------------------- dynamics
+    def inject(self, x: float, y: float, th: float, energy: float) -> None:
+        """Add ``energy`` to the cell nearest to pose-cell coordinates ``(x, y, th)``."""
+        ix = int(math.floor(x + 0.5)) % self.n_xy
+        iy = int(math.floor(y + 0.5)) % self.n_xy
+        ith = int(math.floor(th + 0.5)) % self.n_th
+        self.cells[ith, iy, ix] += energy
+
+    def attractor_step(self) -> None:
+        """Local excitation, local inhibition, global inhibition and normalisation."""
+        p = self.cells
+        n_th, n = self.n_th, self.n_xy
+        q = p @ self._e_xy
+        q = np.matmul(self._e_xy_t, q)
+        q = (self._e_th_t @ q.reshape(n_th, n * n)).reshape(n_th, n, n)
+        r = q @ self._i_xy
+        r = np.matmul(self._i_xy_t, r)
+        r = (self._i_th_t @ r.reshape(n_th, n * n)).reshape(n_th, n, n)
+        q -= r
+        q -= self.config.pc_global_inhib
+        np.maximum(q, 0.0, out=q)
+        total = float(q.sum())
+        if total > 0.0:
+            q /= total
+        else:  # all activity inhibited away (cannot happen with sane parameters): restart
+            q[...] = 0.0
+            bx, by, bth = self.best
+            q[int(bth) % n_th, int(by) % n, int(bx) % n] = 1.0
+        self.cells = q
+
+    def path_integrate(self, translation_m: float, rotation_rad: float) -> None:
+        """Shift the activity by a forward translation (m) and a rotation (rad), wrapping."""
+        v = translation_m / self.config.pc_cell_x_size
+        if v != 0.0:
+            self.cells = self._translate(self.cells, v)
+        if rotation_rad != 0.0:
+            # Row k of the result = (1 - f) * row (k - i) + f * row (k - i - 1), rows = theta.
+            s = rotation_rad / self.th_size
+            i = math.floor(s)
+            f = s - i
+            perm = self._perm_th_t
+            shift = perm[i % self.n_th]
+            if f > 0.0:
+                shift = (1.0 - f) * shift + f * perm[(i + 1) % self.n_th]
+            n = self.n_xy
+            self.cells = (shift @ self.cells.reshape(self.n_th, n * n)).reshape(self.n_th, n, n)
+
+    def _translate(self, p: FloatArray, v: float) -> FloatArray:
+        """Shift each theta layer by ``v`` cells along its heading (bilinear, wrap-around)."""
+        s = self._shift_matrices(v * self._cos_sin)  # (2 n_th, n, n)
+        sx = s[: self.n_th]  # acts on x from the right
+        sy_t = s[self.n_th :].transpose(0, 2, 1)  # acts on y from the left
+        return np.matmul(np.matmul(sy_t, p), sx)
+
+    def _shift_matrices(self, d: FloatArray) -> FloatArray:
+        """Per-layer ``S`` with ``(row @ S)`` = row shifted by ``d[k]`` cells (linear weights)."""
+        whole = np.floor(d)
+        frac = (d - whole)[:, None, None]
+        first = whole.astype(np.intp) % self.n_xy
+        perm = self._perm_xy
+        a = perm.take(first, axis=0)
+        b = perm.take((first + 1) % self.n_xy, axis=0)
+        b -= a
+        b *= frac
+        a += b
+        return a
+
+    def find_best(self) -> tuple[float, float, float]:
+        """Decode the activity peak ``(x, y, th)`` in cell units, each in ``[0, dim)``.
+
+        Population-vector (circular mean) decoding over the cells within ``pc_cells_to_avg`` of
+        the most active cell (the first maximum in ``[th, y, x]`` order), as OpenRatSLAM.
+        """
+        p = self.cells
+        k, j, i = np.unravel_index(int(np.argmax(p)), p.shape)
+        off = self._avg_offsets
+        ith = (k + off) % self.n_th
+        iy = (j + off) % self.n_xy
+        ix = (i + off) % self.n_xy
+        sub = p.take(ith, axis=0).take(iy, axis=1).take(ix, axis=2)
+        x = _circular_mean(sub.sum(axis=(0, 1)) @ self._sincos_xy[ix], self.n_xy)
+        y = _circular_mean(sub.sum(axis=(0, 2)) @ self._sincos_xy[iy], self.n_xy)
+        th = _circular_mean(sub.sum(axis=(1, 2)) @ self._sincos_th[ith], self.n_th)
+        self.best = (x, y, th)
+        return self.best
+
+    def update(self, translation_m: float, rotation_rad: float) -> tuple[float, float, float]:
+        """One odometry update: attractor step, path integration, peak decoding."""
+        self.attractor_step()
+        self.path_integrate(translation_m, rotation_rad)
+        return self.find_best()
+
+    def distance(self, a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+        """Euclidean distance in cells between two pose-cell coordinates, with wrap-around."""
+        return math.sqrt(
+            _wrapped(a[0] - b[0], self.n_xy) ** 2
+            + _wrapped(a[1] - b[1], self.n_xy) ** 2
+            + _wrapped(a[2] - b[2], self.n_th) ** 2
+        )
+
+
+def _permutations(n: int) -> FloatArray:
+    """``P[m]`` (n x n) with ``(v @ P[m])[i] = v[(i - m) % n]``: a circular shift by ``m``."""
+    src = np.arange(n)[None, :, None]
+    dst = np.arange(n)[None, None, :]
+    m = np.arange(n)[:, None, None]
+    return ((dst - src) % n == m).astype(np.float64)
+
+
+def _circular_mean(sin_cos: FloatArray, dim: int) -> float:
+    """Circular mean, in cell units ``[0, dim)``, from summed ``(sin, cos)`` of cell angles."""
+    value = math.atan2(float(sin_cos[0]), float(sin_cos[1])) * dim / (2.0 * math.pi) % dim
+    return 0.0 if value >= dim else float(value)  # -0.0 rounding can give exactly dim
+
+
+def _wrapped(delta: float, dim: int) -> float:
+    d = abs(delta) % dim
+    return min(d, dim - d)
+
+
+class ActionKind(enum.Enum):
+    """Experience-map actions of OpenRatSLAM's ``PosecellNetwork::get_action``."""
+
+    NO_ACTION = 0
+    CREATE_NODE = 1
+    CREATE_EDGE = 2
+    SET_NODE = 3
+
+
+@dataclass(frozen=True, slots=True)
+class Action:
+    """One experience-map action: ``src`` is the current experience before it, ``dest`` after."""
+
+    kind: ActionKind
+    src: int
+    dest: int
+    relative_rad: float
+
+
+@dataclass(slots=True)
+class _ViewCell:
+    """Pose-cell association of one view template."""
+
+    x: float
+    y: float
+    th: float
+    decay: float
+    decay_frame: int  # frame at which ``decay`` was last written
+    experiences: list[int]
+
+
+class PoseCellExperiences:
+    """Pose cells with view-cell energy injection and experience-map actions (OpenRatSLAM).
+
+    Call :meth:`on_view_template` and :meth:`on_odo` once per frame, then :meth:`get_action`.
+    """
+
+    def __init__(self, config: FrontEndConfig) -> None:
+        """Create the network; no templates or experiences yet."""
+        self.config = config
+        self.network = PoseCellNetwork(config)
+        self._views: list[_ViewCell] = []
+        self._experiences: list[tuple[float, float, float]] = []
+        self._experience_vt: list[int] = []
+        self.current_vt = 0
+        self.prev_vt = 0
+        self.current_exp = 0
+        self._vt_delta_th = 0.0  # relative angle of the last view, in theta cells
+        self._frame = 0
+        self._odo_update = False
+        self._vt_update = False
+
+    @property
+    def experience_count(self) -> int:
+        """Number of experiences created so far."""
+        return len(self._experiences)
+
+    def experience_pose_cells(self, exp_id: int) -> tuple[float, float, float]:
+        """Pose-cell coordinates ``(x, y, th)`` recorded for experience ``exp_id``."""
+        return self._experiences[exp_id]
+
+    def view_decay(self, vt: int) -> float:
+        """Return the current decay of view cell ``vt`` (grows while the view persists)."""
+        return self._decay_now(self._views[vt])
+
+    def _decay_now(self, cell: _ViewCell) -> float:
+        """Decay after this frame's restore; every cell recovers by ``pc_vt_restore`` a frame."""
+        restored = cell.decay - self.config.pc_vt_restore * (self._frame - cell.decay_frame)
+        return max(self.config.vt_active_decay, restored)
+
+    def on_view_template(self, vt: int, relative_rad: float) -> None:
+        """Take the frame's view template (``vt`` is new iff it equals the number of templates).
+
+        A familiar view that is not among the ``vt_recent_no_inject`` newest injects energy at the
+        pose cells it was first seen at, shifted in theta by the relative angle. The energy falls
+        with the view cell's decay, which grows while the same view persists (OpenRatSLAM's
+        ``PC_VT_INJECT_ENERGY / 30 * (30 - exp(1.2 * decay))``) and recovers when it does not.
+        """
+        cfg = self.config
+        self._frame += 1
+        n_th = self.network.n_th
+        # The relative angle of the current view, in theta cells (0 for a new template).
+        self._vt_delta_th = relative_rad / (2.0 * math.pi) * n_th
+        if vt > len(self._views):
+            raise ValueError(f"view template {vt} skips ids; {len(self._views)} known")
+        if vt == len(self._views):
+            x, y, th = self.network.best
+            self._views.append(_ViewCell(x, y, th, cfg.vt_active_decay, self._frame, []))
+        else:
+            cell = self._views[vt]
+            decay = max(
+                cfg.vt_active_decay,
+                cell.decay - cfg.pc_vt_restore * (self._frame - 1 - cell.decay_frame),
+            )
+            if vt + cfg.vt_recent_no_inject < len(self._views):
+                if vt == self.current_vt:
+                    decay += cfg.vt_active_decay
+                energy = cfg.pc_vt_inject_energy / 30.0 * (30.0 - math.exp(1.2 * decay))
+                if energy > 0.0:
+                    th = (cell.th + self._vt_delta_th) % n_th
+                    self.network.inject(cell.x, cell.y, th, energy)
+            # This frame's restore for this cell, then remember when it was written.
+            cell.decay = max(cfg.vt_active_decay, decay - cfg.pc_vt_restore)
+            cell.decay_frame = self._frame
+        self.prev_vt = self.current_vt
+        self.current_vt = vt
+        self._vt_update = True
+
+    def on_odo(self, translation_m: float, rotation_rad: float) -> None:
+        """Odometry since the previous frame: one network update."""
+        self.network.update(translation_m, rotation_rad)
+        self._odo_update = True
+
+    def _delta_pc(self, exp: tuple[float, float, float]) -> float:
+        """Pose-cell distance from the peak (theta corrected by the view's angle) to ``exp``."""
+        x, y, th = self.network.best
+        corrected = (th - self._vt_delta_th) % self.network.n_th
+        return self.network.distance((x, y, corrected), exp)
+
+    def _create_experience(self) -> int:
+        self._experiences.append(self.network.best)
+        self._experience_vt.append(self.current_vt)
+        self.current_exp = len(self._experiences) - 1
+        self._views[self.current_vt].experiences.append(self.current_exp)
+        return self.current_exp
+
+    def get_action(self) -> Action:
+        """Decide the experience-map action once a view and odometry arrived (``get_action``).
+
+        - no experience yet, or the current view has none: create one;
+        - else, when the peak moved more than ``exp_delta_pc_threshold`` cells from the current
+          experience or the view changed: the closest other experience of the current view within
+          the threshold becomes current through a new link (loop closure), or, if none is close
+          enough, a new experience is created;
+        - otherwise nothing.
+
+        (OpenRatSLAM's code also names a ``SET_NODE`` outcome, but its conditions never produce
+        it; a link is always followed by setting the current experience.)
+        """
+        if not (self._odo_update and self._vt_update):
+            return Action(ActionKind.NO_ACTION, self.current_exp, self.current_exp, 0.0)
+        self._odo_update = self._vt_update = False
+        src = self.current_exp
+        rel = self.relative_rad
+        if not self._views:
+            return Action(ActionKind.NO_ACTION, src, src, 0.0)
+        exps = self._views[self.current_vt].experiences
+        if not self._experiences or not exps:
+            return Action(ActionKind.CREATE_NODE, src, self._create_experience(), 0.0)
+        threshold = self.config.exp_delta_pc_threshold
+        moved = self._delta_pc(self._experiences[self.current_exp]) > threshold
+        if not (moved or self.current_vt != self.prev_vt):
+            return Action(ActionKind.NO_ACTION, src, src, 0.0)
+        best_id, best_delta = -1, math.inf
+        for exp_id in exps:
+            if exp_id == self.current_exp:
+                continue
+            delta = self._delta_pc(self._experiences[exp_id])
+            if delta < best_delta:
+                best_id, best_delta = exp_id, delta
+        if best_delta < threshold:
+            self.current_exp = best_id
+            return Action(ActionKind.CREATE_EDGE, src, best_id, rel)
+        return Action(ActionKind.CREATE_NODE, src, self._create_experience(), 0.0)
+
+    @property
+    def relative_rad(self) -> float:
+        """Relative angle of the current view match (``get_relative_rad``), radians."""
+        return self._vt_delta_th * 2.0 * math.pi / self.network.n_th
