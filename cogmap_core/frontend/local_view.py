@@ -234,7 +234,8 @@ class LocalViewCells:
         self._desc2 = grown(self._desc2)
         # (capacity, Y, n_offsets, width) view of every shifted window, no copy.
         windows = np.lib.stride_tricks.sliding_window_view(self._templates, self._width, axis=2)
-        self._windows = windows[:, :, self._offsets, :]
+        last = int(self._offsets[-1]) + 1
+        self._windows = windows[:, :, 0 : last : self.config.vt_step_match, :]  # a view, no copy
         self._capacity = capacity
 
     def _rebuild_index(self) -> None:
@@ -367,7 +368,7 @@ class _AreaPlan:
         sx = width / config.reference_image_width
         y0, y1 = config.image_crop_y_min * sy, config.image_crop_y_max * sy
         x0, x1 = config.image_crop_x_min * sx, config.image_crop_x_max * sx
-        if y1 - y0 < 0.5 or x1 - x0 < 0.5:
+        if y1 - y0 < 1.0 or x1 - x0 < 1.0:
             raise InputFileError(f"camera image of shape {tuple(shape)} is too small to crop")
         self.rows = min(height, math.ceil(y1 - 1e-9))
         self.cols = min(width, math.ceil(x1 - 1e-9))

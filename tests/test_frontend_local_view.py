@@ -1,0 +1,190 @@
+"""Local view cells: template extraction, shifted matching, new templates, fast == exhaustive."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from cogmap_core.errors import InputFileError
+from cogmap_core.frontend import FrontEndConfig, LocalViewCells
+
+# A reference image 420 px wide with the crop rows 0-140: every template pixel is exactly one
+# 7x7 block of the image, so an image built from 7x7 blocks gives a known template.
+BLOCK = 7
+EXACT = FrontEndConfig(
+    reference_image_width=420,
+    image_crop_x_max=420,
+    image_crop_y_max=140,
+    camera_hfov_deg=60.0,
+)
+
+
+def strip(seed: int, width: int = 80, height: int = 20, contrast: float = 1.0) -> np.ndarray:
+    """A smooth random texture at template resolution (a 'panorama' wider than a view)."""
+    rng = np.random.default_rng(seed)
+    a = rng.random((height, width))
+    a = cv2.GaussianBlur(a, (0, 0), 1.2)
+    a = (a - a.min()) / (a.max() - a.min())
+    return np.clip(40 + 170 * contrast * a, 0, 255).astype(np.uint8)
+
+
+def view_image(panorama: np.ndarray, start: int) -> np.ndarray:
+    """A 420x240 camera image whose template is ``panorama[:, start:start + 60]``."""
+    cells = panorama[:, start : start + 60]
+    top = np.kron(cells, np.ones((BLOCK, BLOCK), dtype=np.uint8))  # 140 x 420
+    bottom = np.full((100, 420), 17, dtype=np.uint8)  # below the crop: ignored
+    return np.vstack([top, bottom])
+
+
+def test_template_is_the_area_mean_of_the_crop() -> None:
+    lv = LocalViewCells(FrontEndConfig())
+    rng = np.random.default_rng(1)
+    image = cv2.GaussianBlur((rng.random((240, 416)) * 255).astype(np.uint8), (0, 0), 2)
+    template = lv.make_template(image)
+    assert template.shape == (20, 60) and template.dtype == np.uint8
+    reference = cv2.resize(image[:150], (60, 20), interpolation=cv2.INTER_AREA)
+    assert np.abs(template.astype(int) - reference).max() <= 1
+    # The rows below the crop do not matter.
+    image2 = image.copy()
+    image2[150:] = 0
+    assert np.array_equal(lv.make_template(image2), template)
+
+
+@pytest.mark.parametrize("scale", [2, 4])
+def test_reduced_images_give_nearly_the_same_template(scale: int) -> None:
+    lv = LocalViewCells(FrontEndConfig())
+    rng = np.random.default_rng(2)
+    image = cv2.GaussianBlur((rng.random((240, 416)) * 255).astype(np.uint8), (0, 0), 6)
+    small = cv2.resize(image, (416 // scale, 240 // scale), interpolation=cv2.INTER_AREA)
+    full = lv.make_template(image).astype(int)
+    reduced = lv.make_template(small).astype(int)
+    assert reduced.shape == (20, 60)
+    assert np.abs(full - reduced).mean() < 1.5
+
+
+def test_exact_block_images_give_the_block_template() -> None:
+    lv = LocalViewCells(EXACT)
+    pano = strip(3)
+    assert np.array_equal(lv.make_template(view_image(pano, 10)), pano[:, 10:70])
+
+
+def test_bad_images_are_rejected() -> None:
+    lv = LocalViewCells(FrontEndConfig())
+    with pytest.raises(InputFileError):
+        lv.make_template(np.zeros((240, 416, 3), dtype=np.uint8))
+    with pytest.raises(InputFileError):
+        lv.make_template(np.zeros((240, 416), dtype=np.float32))  # type: ignore[arg-type]
+    with pytest.raises(InputFileError):
+        lv.make_template(np.zeros((1, 1), dtype=np.uint8))
+
+
+@pytest.mark.parametrize("k", [-4, -3, -1, 0, 2, 4])
+def test_shifted_view_matches_with_the_relative_angle(k: int) -> None:
+    lv = LocalViewCells(EXACT)
+    pano = strip(4)
+    first = lv.observe(view_image(pano, 10))
+    assert (first.template_id, first.is_new) == (0, True)
+    other = lv.observe(view_image(strip(5), 10))  # an unrelated place
+    assert (other.template_id, other.is_new) == (1, True)
+    # The camera turned so that the view window moved k template columns to the right.
+    match = lv.observe(view_image(pano, 10 + k))
+    assert match.template_id == 0 and not match.is_new
+    assert match.offset == 4 + k
+    assert match.error == 0.0
+    # 60 deg over 60 columns: one degree per column; turning right (window to the right) < 0.
+    assert match.relative_rad == pytest.approx(-math.radians(k), abs=1e-12)
+    assert lv.count == 2
+
+
+def test_shift_beyond_the_search_range_makes_a_new_template() -> None:
+    lv = LocalViewCells(EXACT)
+    pano = strip(6)
+    lv.observe(view_image(pano, 5))
+    result = lv.observe(view_image(pano, 5 + 12))
+    assert result.is_new and result.template_id == 1
+
+
+def test_threshold_is_inclusive_and_exact() -> None:
+    lv = LocalViewCells(FrontEndConfig())
+    flat = np.full((20, 60), 100, dtype=np.uint8)
+    lv.add(flat)
+    # The compared window is 52 x 20 = 1040 pixels; the threshold is 0.03 * 1040 * 255 = 7956.
+    assert lv.max_sad == 7956
+    view = flat.astype(int)
+    centre = view[:, 4:56].reshape(-1)
+    centre += 7
+    centre[:676] += 1  # SAD = 676 * 8 + 364 * 7 = 7956
+    view[:, 4:56] = centre.reshape(20, 52)
+    at = lv.match(view.astype(np.uint8))
+    assert (at.template_id, at.sad) == (0, 7956)
+    view[0, 30] += 1
+    assert not lv.match(view.astype(np.uint8)).matched
+    assert not lv.match_exhaustive(view.astype(np.uint8)).matched
+
+
+def test_ties_break_by_lowest_template_then_lowest_offset() -> None:
+    lv = LocalViewCells(FrontEndConfig())
+    flat = np.full((20, 60), 90, dtype=np.uint8)
+    pano = strip(7)
+    lv.add(pano[:, 0:60])
+    lv.add(flat)
+    lv.add(flat)
+    for search in (lv.match, lv.match_exhaustive):
+        result = search(flat)
+        assert (result.template_id, result.offset, result.sad) == (1, 0, 0)
+
+
+def _families(rng: np.random.Generator, count: int) -> list[np.ndarray]:
+    """Templates in a few families of near-duplicates (shifted, noisy, brightness-changed)."""
+    bases = [strip(100 + i, contrast=0.3 + 0.1 * i) for i in range(6)]
+    out = []
+    for _ in range(count):
+        base = bases[rng.integers(len(bases))]
+        start = int(rng.integers(0, 20))
+        t = base[:, start : start + 60].astype(int)
+        t = t + rng.integers(-12, 13) + rng.normal(0, rng.choice([0.0, 1.0, 4.0]), t.shape)
+        out.append(np.clip(np.rint(t), 0, 255).astype(np.uint8))
+    return out
+
+
+def test_fast_matcher_equals_exhaustive_search() -> None:
+    rng = np.random.default_rng(8)
+    lv = LocalViewCells(FrontEndConfig())
+    stored = _families(rng, 400)
+    for t in stored[:150]:
+        lv.add(t)
+    lv.add(stored[3])  # an exact duplicate: ties between templates
+    for t in stored[150:]:
+        lv.add(t)
+    assert lv._indexed > 0 and lv.count > lv._indexed  # sorted index and unsorted tail in use
+    unrelated = [strip(500 + i, contrast=0.3 + 0.01 * i)[:, :60] for i in range(40)]
+    queries = _families(rng, 300) + unrelated + [stored[i] for i in range(0, 400, 37)]
+    matched = 0
+    for q in queries:
+        hint = int(rng.integers(-1, lv.count)) if rng.random() < 0.7 else None
+        hint = None if hint == -1 else hint
+        fast = lv.match(q, hint)
+        slow = lv.match_exhaustive(q)
+        assert (fast.template_id, fast.offset, fast.sad) == (
+            slow.template_id,
+            slow.offset,
+            slow.sad,
+        )
+        matched += fast.matched
+        # The pruning really prunes: far fewer exact comparisons than the exhaustive search.
+        assert fast.candidates < slow.candidates
+    assert 50 < matched <= len(queries) - 30  # both outcomes are exercised
+
+
+def test_observe_reports_the_error_of_a_match() -> None:
+    lv = LocalViewCells(EXACT)
+    pano = strip(9)
+    lv.observe(view_image(pano, 10))
+    noisy = view_image(pano, 10).astype(int)
+    noisy[:140] += 3
+    result = lv.observe(np.clip(noisy, 0, 255).astype(np.uint8))
+    assert result.template_id == 0 and not result.is_new
+    assert result.error == pytest.approx(3 / 255)

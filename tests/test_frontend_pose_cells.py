@@ -1,0 +1,168 @@
+"""Pose cell network: attractor dynamics, path integration with wrap-around, peak decoding."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cogmap_core.frontend import FrontEndConfig, PoseCellNetwork
+
+CFG = FrontEndConfig()
+CELL = CFG.pc_cell_x_size  # 0.015 m
+TH_CELL = 2 * math.pi / CFG.pc_dim_th  # 10 degrees
+
+
+def delta_network(x: int, y: int, th: int) -> PoseCellNetwork:
+    """A network whose whole activity is one cell."""
+    net = PoseCellNetwork(CFG)
+    net.cells[...] = 0.0
+    net.cells[th, y, x] = 1.0
+    net.find_best()
+    return net
+
+
+def test_starts_with_one_active_cell_in_the_centre() -> None:
+    net = PoseCellNetwork(CFG)
+    assert net.cells.shape == (36, 11, 11)
+    assert net.cells.sum() == 1.0 and net.cells[18, 5, 5] == 1.0
+    assert net.best == (5.0, 5.0, 18.0)
+
+
+def test_attractor_keeps_a_normalised_packet_in_place() -> None:
+    net = PoseCellNetwork(CFG)
+    for _ in range(30):
+        net.update(0.0, 0.0)
+    assert net.cells.sum() == pytest.approx(1.0)
+    assert net.cells.min() >= 0.0
+    assert np.unravel_index(int(net.cells.argmax()), net.cells.shape) == (18, 5, 5)
+    assert net.best == pytest.approx((5.0, 5.0, 18.0), abs=1e-9)
+    # Global inhibition keeps the packet compact: most cells are exactly zero.
+    assert np.count_nonzero(net.cells) < 0.2 * net.cells.size
+
+
+@pytest.mark.parametrize(
+    ("th", "cells", "expected_xy"),
+    [
+        (0, 2.0, (7, 5)),  # heading 0: +x
+        (9, 3.0, (5, 8)),  # heading 90 deg: +y
+        (18, 1.0, (4, 5)),  # heading 180 deg: -x
+        (27, 4.0, (5, 1)),  # heading 270 deg: -y
+        (0, 8.0, (2, 5)),  # wraps around x: 5 + 8 = 13 = 2 (mod 11)
+        (9, 17.0, (5, 0)),  # wraps around y: 5 + 17 = 22 = 0 (mod 11)
+        (18, -3.0, (8, 5)),  # reversing along heading 180 deg moves +x
+    ],
+)
+def test_translation_moves_each_heading_layer_along_its_heading(
+    th: int, cells: float, expected_xy: tuple[int, int]
+) -> None:
+    net = delta_network(5, 5, th)
+    net.path_integrate(cells * CELL, 0.0)
+    ex, ey = expected_xy
+    assert net.cells[th, ey, ex] == pytest.approx(1.0, abs=1e-9)
+    assert net.cells.sum() == pytest.approx(1.0)
+
+
+def test_fractional_translation_splits_activity_bilinearly() -> None:
+    net = delta_network(10, 5, 0)
+    net.path_integrate(0.25 * CELL, 0.0)
+    assert net.cells[0, 5, 10] == pytest.approx(0.75)
+    assert net.cells[0, 5, 0] == pytest.approx(0.25)  # wrapped
+    # Heading 45 deg is not a layer (10 deg cells), take 40 deg: shift (cos, sin) * 1 cell.
+    net = delta_network(5, 5, 4)
+    net.path_integrate(CELL, 0.0)
+    c, s = math.cos(math.radians(40)), math.sin(math.radians(40))
+    expected = {
+        (5, 5): (1 - c) * (1 - s),
+        (5, 6): (1 - c) * s,
+        (6, 5): c * (1 - s),
+        (6, 6): c * s,
+    }
+    for (x, y), w in expected.items():
+        assert net.cells[4, y, x] == pytest.approx(w, abs=1e-12)
+    net.find_best()
+    assert net.best[0] > 5.0 and net.best[1] > 5.0
+
+
+@pytest.mark.parametrize(
+    ("th", "rotation_cells", "expected_th"),
+    [(0, 3.0, 3), (0, -1.0, 35), (30, 9.0, 3), (18, -18.0, 0), (5, 36.0, 5)],
+)
+def test_rotation_shifts_theta_with_wrap(th: int, rotation_cells: float, expected_th: int) -> None:
+    net = delta_network(5, 5, th)
+    net.path_integrate(0.0, rotation_cells * TH_CELL)
+    assert net.cells[expected_th, 5, 5] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_fractional_rotation_splits_activity_linearly() -> None:
+    net = delta_network(5, 5, 0)
+    net.path_integrate(0.0, -0.3 * TH_CELL)
+    assert net.cells[0, 5, 5] == pytest.approx(0.7)
+    assert net.cells[35, 5, 5] == pytest.approx(0.3)
+
+
+def test_peak_decoding_wraps_around() -> None:
+    net = PoseCellNetwork(CFG)
+    net.cells[...] = 0.0
+    net.cells[7, 3, 10] = 0.5
+    net.cells[7, 3, 0] = 0.5
+    assert net.find_best() == pytest.approx((10.5, 3.0, 7.0), abs=1e-12)
+    net.cells[...] = 0.0
+    net.cells[35, 10, 4] = 0.3
+    net.cells[1, 10, 4] = 0.3
+    net.cells[0, 0, 4] = 0.4
+    x, y, th = net.find_best()
+    assert (x, th) == pytest.approx((4.0, 0.0), abs=1e-12)
+    assert y == pytest.approx(10.4, abs=0.01)  # 60% at y = 10, 40% at y = 0 = 11
+    assert 0.0 <= y < 11.0
+
+
+@pytest.mark.parametrize("th", [0, 9, 18])
+def test_odometry_moves_the_packet_by_the_expected_number_of_cells(th: int) -> None:
+    """The full dynamics (attractor + path integration) over many steps."""
+    net = PoseCellNetwork(CFG)
+    net.update(0.0, (th - 18) * TH_CELL)  # turn the packet to heading layer th
+    for _ in range(20):
+        net.update(0.0, 0.0)
+    x0, y0, th0 = net.best
+    assert th0 == pytest.approx(th, abs=1e-6)
+    steps, per_step = 33, 0.5  # 16.5 cells: wraps around the 11-cell torus
+    for _ in range(steps):
+        net.update(per_step * CELL, 0.0)
+    x1, y1, th1 = net.best
+    heading = th * TH_CELL
+    # The packet spans a few heading layers whose mean direction is the centre layer's; its
+    # off-centre layers move slightly less along the heading (cos of +-10..30 deg): about 1%.
+    moved = steps * per_step
+    ex = (x0 + moved * math.cos(heading)) % 11
+    ey = (y0 + moved * math.sin(heading)) % 11
+    assert net.distance((x1, y1, th1), (ex, ey, th)) < 0.02 * moved
+    along = (x1 - x0) * math.cos(heading) + (y1 - y0) * math.sin(heading)
+    assert math.remainder(along - moved, 11) == pytest.approx(-0.186, abs=0.01)
+    # ... and the shortfall is small and along the heading: no drift sideways.
+    side = -(x1 - x0) * math.sin(heading) + (y1 - y0) * math.cos(heading)
+    assert abs(math.remainder(side, 11)) < 1e-6
+
+
+def test_a_full_turn_and_a_closed_square_return_to_the_start() -> None:
+    net = PoseCellNetwork(CFG)
+    for _ in range(10):
+        net.update(0.0, 0.0)
+    start = net.best
+    for _ in range(4):
+        for _ in range(7):
+            net.update(CELL, 0.0)
+        for _ in range(3):
+            net.update(0.0, math.pi / 6)
+    assert net.distance(net.best, start) < 0.05
+
+
+def test_injected_energy_pulls_the_packet() -> None:
+    net = PoseCellNetwork(CFG)
+    for _ in range(10):
+        net.update(0.0, 0.0)
+    for _ in range(30):
+        net.inject(1.0, 8.0, 3.0, 0.1)
+        net.update(0.0, 0.0)
+    assert net.distance(net.best, (1.0, 8.0, 3.0)) < 0.5
