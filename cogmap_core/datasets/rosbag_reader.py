@@ -1,0 +1,649 @@
+"""Streaming reader for iRat-layout bags (ROS1, and ROS2 where rosbags can), pure rosbags.
+
+:func:`open_bag` checks the bag and its topics; :meth:`BagReader.frames` then streams
+:class:`~cogmap_core.frames.Frame` objects in time order: the decoded grayscale camera image, the
+odometry integrated since the previous frame and the ground-truth pose at the frame's time.
+
+Conventions (those of OpenRatSLAM):
+
+- data time is the message header stamp (the bag's record time when a stamp is zero);
+  ``Frame.time`` counts seconds from the bag's first message;
+- odometry: each message contributes ``twist.linear.x * dt`` and ``twist.angular.z * dt`` with
+  ``dt`` the header-stamp interval to the previous odometry message; a frame gets everything
+  recorded since the previous frame (the first message only starts the clock);
+- ground truth: interpolated between the two poses around the frame time when they are at most
+  1 s apart, else the nearest pose within 0.25 s, else ``None``.
+
+Bad data never raises a traceback. The policy, counted in :attr:`BagReader.counters` and
+summarised by :attr:`BagReader.warnings`:
+
+- undecodable JPEG, image of another size than the first, undeserialisable message: skipped
+  (the odometry carries over to the next frame);
+- image stamp earlier than the previous frame's: frame skipped (frame times never decrease);
+- odometry with NaN/inf velocity: skipped (the next message covers its interval);
+- odometry stamp earlier than the previous one: skipped; after three in a row the clock is taken
+  to have been reset and integration restarts from the new stamps; odometry stamp more than
+  ``max_odometry_gap`` after the previous: that interval contributes nothing (motion unknown);
+- ground truth NaN/inf or going backwards: skipped.
+
+Errors (:class:`BagError` and subclasses, one line each): missing file, not a bag, truncated,
+unindexed or corrupt bag, missing topic (listing the topics present), wrong message type, a bag
+none of whose images decode.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import shutil
+import struct
+import tempfile
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection
+
+from cogmap_core.datasets.errors import BagError, BagMessageTypeError, BagTopicError
+from cogmap_core.datasets.topics import (
+    GROUND_TRUTH_TYPES,
+    IMAGE_TYPE,
+    ODOMETRY_TYPE,
+    BagTopics,
+)
+from cogmap_core.errors import ParameterError
+from cogmap_core.frames import Frame
+
+log = logging.getLogger(__name__)
+
+_DECODE_FLAGS = {
+    1: cv2.IMREAD_GRAYSCALE,
+    2: cv2.IMREAD_REDUCED_GRAYSCALE_2,
+    4: cv2.IMREAD_REDUCED_GRAYSCALE_4,
+    8: cv2.IMREAD_REDUCED_GRAYSCALE_8,
+}
+_ROS1_MAGIC = b"#ROSBAG V2.0\n"
+_GT_INTERPOLATION_GAP = 1.0  # s
+_GT_HOLD = 0.25  # s
+_CLOCK_RESET_AFTER = 3
+_START_MARGIN = 2.0  # s of data read before start_time (odometry clock, ground truth)
+
+
+@dataclass(frozen=True)
+class BagInfo:
+    """What a bag holds.
+
+    Attributes:
+        path: the bag.
+        ros_version: 1 or 2.
+        duration: seconds between the first and the last message.
+        frame_count: camera messages (frames actually yielded may be fewer).
+        odometry_count: odometry messages.
+        ground_truth_count: ground-truth messages (0 without ground truth).
+        has_ground_truth: whether the ground-truth topic exists with a usable type.
+        topics: every topic in the bag -> its message type.
+        image_topic, odometry_topic, ground_truth_topic: the topics used.
+        ground_truth_type: message type of the ground truth (``None`` without).
+
+    """
+
+    path: Path
+    ros_version: int
+    duration: float
+    frame_count: int
+    odometry_count: int
+    ground_truth_count: int
+    has_ground_truth: bool
+    topics: dict[str, str]
+    image_topic: str
+    odometry_topic: str
+    ground_truth_topic: str | None
+    ground_truth_type: str | None
+
+    @property
+    def frame_rate(self) -> float:
+        """Mean camera rate (Hz)."""
+        return self.frame_count / self.duration if self.duration > 0 else 0.0
+
+
+@dataclass
+class ReadCounters:
+    """Counts of one pass over a bag (see the module docstring for the policy)."""
+
+    frames: int = 0
+    undecodable_images: int = 0
+    image_size_changes: int = 0
+    image_stamps_backwards: int = 0
+    corrupt_messages: int = 0
+    nonfinite_odometry: int = 0
+    odometry_stamps_backwards: int = 0
+    odometry_clock_resets: int = 0
+    odometry_gaps: int = 0
+    nonfinite_ground_truth: int = 0
+    ground_truth_stamps_backwards: int = 0
+    frames_without_ground_truth: int = 0
+    first_seen: dict[str, float] = field(default_factory=dict)
+
+    def note(self, name: str, time: float) -> None:
+        """Count one event of kind ``name`` at data time ``time`` (s)."""
+        setattr(self, name, getattr(self, name) + 1)
+        if name not in self.first_seen:
+            self.first_seen[name] = time
+            log.warning("%s (first at t=%.2f s)", _WARNING_TEXT[name], time)
+
+    def warnings(self) -> list[str]:
+        """One line per kind of problem met, with its count and first time."""
+        out = []
+        for f in fields(self):
+            if f.name in ("frames", "first_seen"):
+                continue
+            n = getattr(self, f.name)
+            if n:
+                first = self.first_seen.get(f.name, float("nan"))
+                out.append(f"{n} x {_WARNING_TEXT[f.name]} (first at t={first:.2f} s)")
+        return out
+
+
+_WARNING_TEXT = {
+    "undecodable_images": "undecodable camera image skipped",
+    "image_size_changes": "camera image of a different size skipped",
+    "image_stamps_backwards": "camera frame stamped before the previous one skipped",
+    "corrupt_messages": "unreadable (corrupt) message skipped",
+    "nonfinite_odometry": "odometry with NaN/inf velocity skipped",
+    "odometry_stamps_backwards": "odometry stamped before the previous one skipped",
+    "odometry_clock_resets": "odometry clock reset accepted",
+    "odometry_gaps": "odometry gap longer than the limit (no motion integrated over it)",
+    "nonfinite_ground_truth": "ground-truth pose with NaN/inf skipped",
+    "ground_truth_stamps_backwards": "ground-truth pose stamped before the previous one skipped",
+    "frames_without_ground_truth": "frame without ground truth nearby",
+}
+
+
+def _yaw(q: Any) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _stamp_ns(msg: Any, record_ns: int) -> int:
+    header = getattr(msg, "header", None)
+    if header is None:
+        return record_ns
+    ns = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+    return ns if ns > 0 else record_ns
+
+
+def _ground_truth_pose(msg: Any, msgtype: str) -> tuple[float, float, float]:
+    if msgtype == "geometry_msgs/msg/Pose2D":
+        return float(msg.x), float(msg.y), float(msg.theta)
+    if msgtype == "geometry_msgs/msg/Pose":
+        pose = msg
+    elif msgtype == "geometry_msgs/msg/PoseStamped":
+        pose = msg.pose
+    else:  # PoseWithCovarianceStamped, Odometry
+        pose = msg.pose.pose
+    return float(pose.position.x), float(pose.position.y), _wrap(_yaw(pose.orientation))
+
+
+def _interpolate(
+    t: float, a: tuple[float, float, float, float], b: tuple[float, float, float, float]
+) -> tuple[float, float, float]:
+    ta, xa, ya, tha = a
+    tb, xb, yb, thb = b
+    alpha = 0.0 if tb <= ta else min(1.0, max(0.0, (t - ta) / (tb - ta)))
+    theta = _wrap(tha + alpha * _wrap(thb - tha))
+    return xa + alpha * (xb - xa), ya + alpha * (yb - ya), theta
+
+
+def _check_ros1_header(path: Path) -> None:
+    """Diagnose truncated / unindexed ROS1 bags precisely before rosbags reads them."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(4096 + 13)
+    body = head[len(_ROS1_MAGIC) :]
+    if len(body) < 4:
+        raise BagError(f"{path} is truncated (only {size} bytes); copy or record it again")
+    (hlen,) = struct.unpack_from("<I", body, 0)
+    fields_: dict[bytes, bytes] = {}
+    pos = 4
+    end = min(4 + hlen, len(body))
+    while pos + 4 <= end:
+        (flen,) = struct.unpack_from("<I", body, pos)
+        item = body[pos + 4 : pos + 4 + flen]
+        pos += 4 + flen
+        name, _, value = item.partition(b"=")
+        fields_[name] = value
+    index_pos_raw = fields_.get(b"index_pos")
+    if index_pos_raw is None or len(index_pos_raw) != 8:
+        raise BagError(f"{path} has a damaged bag header; it is corrupt, copy it again")
+    (index_pos,) = struct.unpack("<Q", index_pos_raw)
+    if index_pos == 0:
+        raise BagError(
+            f"{path} has no index (the recording was not closed properly); reindex it with "
+            "'rosbag reindex' or record it again"
+        )
+    if index_pos >= size:
+        raise BagError(
+            f"{path} is truncated: its index starts at byte {index_pos} but the file has only "
+            f"{size} bytes; copy it again"
+        )
+
+
+class BagReader:
+    """An open bag with the iRat topics; iterate :meth:`frames` (one pass at a time)."""
+
+    def __init__(
+        self,
+        path: str | Path,
+        topics: BagTopics | None = None,
+        image_scale: int = 1,
+        max_odometry_gap: float = 1.0,
+    ) -> None:
+        """Open and check the bag; see :func:`open_bag`."""
+        if image_scale not in _DECODE_FLAGS:
+            raise ParameterError(f"image_scale {image_scale} is not supported; use 1, 2, 4 or 8")
+        if not (max_odometry_gap > 0):
+            raise ParameterError(f"max_odometry_gap {max_odometry_gap} must be > 0 s")
+        self.path = Path(path)
+        self.topics = topics or BagTopics()
+        self.image_scale = image_scale
+        self.max_odometry_gap = float(max_odometry_gap)
+        self.counters = ReadCounters()
+        self._tmpdir: Path | None = None
+        self._reader: AnyReader | None = None
+        self._iterating = False
+        self._reader = self._open_reader()
+        try:
+            self.info = self._inspect()
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------------------ opening
+    def _open_reader(self) -> AnyReader:
+        path = self.path
+        if not path.exists():
+            raise BagError(f"bag {path} does not exist; check the path")
+        ros_paths: list[Path]
+        if path.is_dir():
+            if not (path / "metadata.yaml").exists():
+                raise BagError(
+                    f"{path} is a folder but not a ROS2 bag (no metadata.yaml); give a .bag file "
+                    "or a ROS2 bag folder"
+                )
+            ros_paths = [path]
+        else:
+            try:
+                with path.open("rb") as fh:
+                    magic = fh.read(len(_ROS1_MAGIC))
+            except OSError as exc:
+                raise BagError(f"cannot read {path}: {exc.strerror}; check permissions") from None
+            if not magic:
+                raise BagError(f"{path} is empty; record or generate the bag again")
+            if magic == _ROS1_MAGIC:
+                _check_ros1_header(path)
+                if path.suffix == ".bag":
+                    ros_paths = [path]
+                else:  # rosbags recognises ROS1 bags by their suffix
+                    self._tmpdir = Path(tempfile.mkdtemp(prefix="cogmap-bag-"))
+                    link = self._tmpdir / (path.name + ".bag")
+                    link.symlink_to(path.resolve())
+                    ros_paths = [link]
+            elif magic.startswith(b"#ROSBAG"):
+                version = magic.split(b"\n")[0].decode("ascii", "replace")
+                raise BagError(
+                    f"{path} is a '{version}' bag; only ROS1 bag format 2.0 is supported"
+                )
+            elif path.suffix in (".mcap", ".db3"):
+                ros_paths = [path]
+            else:
+                raise BagError(
+                    f"{path} is not a ROS bag (no '#ROSBAG V2.0' header and not a ROS2 bag); "
+                    "give a .bag file"
+                )
+        try:
+            reader = AnyReader(ros_paths)
+            reader.open()
+        except Exception as exc:  # rosbags raises many kinds on damaged files
+            self._cleanup_tmp()
+            detail = " ".join(str(exc).split()) or type(exc).__name__
+            raise BagError(
+                f"cannot read bag {path}: {detail}; it is damaged or truncated, copy it again"
+            ) from None
+        return reader
+
+    def _inspect(self) -> BagInfo:
+        reader = self._require_reader()
+        all_topics = {name: (info.msgtype or "?") for name, info in reader.topics.items()}
+        listing = ", ".join(f"{t} ({m})" for t, m in sorted(all_topics.items())) or "no topics"
+
+        def need(topic: str, msgtype: str, what: str) -> None:
+            if topic not in all_topics:
+                raise BagTopicError(
+                    f"bag {self.path} has no {what} topic {topic}; it has: {listing}; "
+                    "choose the topic names to read"
+                )
+            if all_topics[topic] != msgtype:
+                raise BagMessageTypeError(
+                    f"topic {topic} in {self.path} carries {all_topics[topic]}, but the {what} "
+                    f"must be {msgtype}; choose the right topic"
+                )
+
+        need(self.topics.image, IMAGE_TYPE, "camera")
+        need(self.topics.odometry, ODOMETRY_TYPE, "odometry")
+        gt_topic = self.topics.ground_truth
+        gt_type: str | None = None
+        if gt_topic is not None and gt_topic in all_topics:
+            gt_type = all_topics[gt_topic]
+            if gt_type not in GROUND_TRUTH_TYPES:
+                raise BagMessageTypeError(
+                    f"ground-truth topic {gt_topic} in {self.path} carries {gt_type}; supported: "
+                    f"{', '.join(GROUND_TRUTH_TYPES)}; choose another topic or none"
+                )
+        self._conns: dict[str, list[Connection]] = {}
+        for conn in reader.connections:
+            self._conns.setdefault(conn.topic, []).append(conn)
+        counts = {t: sum(c.msgcount for c in cs) for t, cs in self._conns.items()}
+        if counts.get(self.topics.image, 0) == 0:
+            raise BagError(f"camera topic {self.topics.image} in {self.path} has no messages")
+        self._gt_type = gt_type
+        self._used = [self.topics.image, self.topics.odometry] + ([gt_topic] if gt_type else [])
+        self._t0_ns = self._first_stamp_ns()
+        return BagInfo(
+            path=self.path,
+            ros_version=2 if reader.is2 else 1,
+            duration=reader.duration / 1e9,
+            frame_count=counts.get(self.topics.image, 0),
+            odometry_count=counts.get(self.topics.odometry, 0),
+            ground_truth_count=counts.get(gt_topic, 0) if gt_type and gt_topic else 0,
+            has_ground_truth=gt_type is not None and counts.get(gt_topic or "", 0) > 0,
+            topics=all_topics,
+            image_topic=self.topics.image,
+            odometry_topic=self.topics.odometry,
+            ground_truth_topic=gt_topic if gt_type else None,
+            ground_truth_type=gt_type,
+        )
+
+    def _first_stamp_ns(self) -> int:
+        """The bag's start: its first record time, or an earlier first stamp of a used topic."""
+        reader = self._require_reader()
+        t0 = int(reader.start_time)
+        for topic in self._used:
+            for conn in self._conns.get(topic, []):
+                gen = reader.messages(connections=[conn])
+                try:
+                    for c, rec, raw in gen:
+                        try:
+                            msg = reader.deserialize(raw, c.msgtype)
+                        except Exception:
+                            break
+                        t0 = min(t0, _stamp_ns(msg, rec))
+                        break
+                except Exception as exc:
+                    raise self._corrupt(exc, None) from None
+                finally:
+                    gen.close()
+        return t0
+
+    def _require_reader(self) -> AnyReader:
+        if self._reader is None:
+            raise BagError(f"bag {self.path} is closed; open it again")
+        return self._reader
+
+    def _corrupt(self, exc: BaseException, t: float | None) -> BagError:
+        where = f" near t={t:.2f} s" if t is not None else ""
+        detail = " ".join(str(exc).split()) or type(exc).__name__
+        return BagError(
+            f"bag {self.path} is corrupt{where} ({detail}); copy it again or read up to there"
+        )
+
+    # ------------------------------------------------------------------------------- access
+    @property
+    def warnings(self) -> list[str]:
+        """Summary lines of the problems met in the last pass (empty when all was clean)."""
+        return self.counters.warnings()
+
+    @property
+    def start_stamp(self) -> float:
+        """Absolute stamp (s) that ``Frame.time`` counts from."""
+        return self._t0_ns / 1e9
+
+    def frames(self, start_time: float = 0.0) -> Iterator[Frame]:
+        """Stream frames in time order, from data time ``start_time`` (s) on.
+
+        Memory stays flat in the bag's length: messages are read chunk by chunk and only about
+        a second of frames waits for the ground truth that brackets it. Counters of this pass
+        are in :attr:`counters`.
+
+        Raises:
+            BagError: the bag is corrupt past the point already read, or no image decodes.
+            ParameterError: ``start_time`` outside the bag.
+
+        """
+        if not (0.0 <= start_time <= self.info.duration + 1.0) or not math.isfinite(start_time):
+            raise ParameterError(
+                f"start time {start_time} s is outside the bag (0-{self.info.duration:.1f} s)"
+            )
+        if self._iterating:
+            raise BagError(f"bag {self.path} is already being read; finish that pass first")
+        return self._frames(start_time)
+
+    def _frames(self, start_time: float) -> Iterator[Frame]:
+        reader = self._require_reader()
+        self._iterating = True
+        counters = ReadCounters()
+        self.counters = counters
+        topics = self.topics
+        image_topic, odom_topic = topics.image, topics.odometry
+        gt_topic = topics.ground_truth if self._gt_type else None
+        gt_type = self._gt_type or ""
+        flag = _DECODE_FLAGS[self.image_scale]
+        t0 = self._t0_ns
+        max_gap_ns = int(self.max_odometry_gap * 1e9)
+        start_ns = t0 + int(start_time * 1e9)
+        read_from = start_ns - int(_START_MARGIN * 1e9) if start_time > _START_MARGIN else None
+        connections = [c for t in self._used for c in self._conns.get(t, [])]
+
+        odom_prev: int | None = None
+        backwards_run = 0
+        trans = rot = 0.0
+        last_image_ns: int | None = None
+        shape: tuple[int, ...] | None = None
+        gt_prev: tuple[float, float, float, float] | None = None
+        pending: deque[tuple[float, NDArray[np.uint8], float, float]] = deque()
+        images_seen = images_decoded = 0
+        index = 0
+        now = 0.0
+
+        def release(frame_data: tuple[float, NDArray[np.uint8], float, float], pose: Any) -> Frame:
+            nonlocal index
+            t, image, tr, ro = frame_data
+            if pose is None and gt_topic is not None:
+                counters.note("frames_without_ground_truth", t)
+            frame = Frame(
+                index=index, time=t, image=image, translation=tr, rotation=ro, ground_truth=pose
+            )
+            index += 1
+            counters.frames += 1
+            return frame
+
+        def held(t: float) -> tuple[float, float, float] | None:
+            if gt_prev is not None and abs(t - gt_prev[0]) <= _GT_HOLD:
+                return gt_prev[1], gt_prev[2], gt_prev[3]
+            return None
+
+        messages = reader.messages(connections=connections, start=read_from)
+        try:
+            while True:
+                try:
+                    item = next(messages, None)
+                except Exception as exc:  # damaged chunk or record
+                    raise self._corrupt(exc, now) from None
+                if item is None:
+                    break
+                conn, record_ns, raw = item
+                topic = conn.topic
+                try:
+                    msg = reader.deserialize(raw, conn.msgtype)
+                except Exception:
+                    counters.note("corrupt_messages", (record_ns - t0) / 1e9)
+                    continue
+                stamp = _stamp_ns(msg, record_ns)
+                now = (stamp - t0) / 1e9
+
+                if topic == odom_topic:
+                    twist = msg.twist.twist
+                    v, w = float(twist.linear.x), float(twist.angular.z)
+                    if not (math.isfinite(v) and math.isfinite(w)):
+                        counters.note("nonfinite_odometry", now)
+                        continue
+                    if odom_prev is None:
+                        odom_prev = stamp
+                        continue
+                    dt_ns = stamp - odom_prev
+                    if dt_ns < 0:
+                        counters.note("odometry_stamps_backwards", now)
+                        backwards_run += 1
+                        if backwards_run >= _CLOCK_RESET_AFTER:
+                            counters.note("odometry_clock_resets", now)
+                            odom_prev = stamp
+                            backwards_run = 0
+                        continue
+                    backwards_run = 0
+                    odom_prev = stamp
+                    if dt_ns > max_gap_ns:
+                        counters.note("odometry_gaps", now)
+                        continue
+                    dt = dt_ns / 1e9
+                    trans += v * dt
+                    rot += w * dt
+
+                elif topic == image_topic:
+                    if stamp < start_ns:  # before the requested start: consume, do not decode
+                        trans = rot = 0.0
+                        last_image_ns = stamp
+                        continue
+                    images_seen += 1
+                    if last_image_ns is not None and stamp < last_image_ns:
+                        counters.note("image_stamps_backwards", now)
+                        continue
+                    data = np.asarray(msg.data, dtype=np.uint8)
+                    image = cv2.imdecode(data, flag) if data.size else None
+                    if image is None:
+                        counters.note("undecodable_images", now)
+                        continue
+                    images_decoded += 1
+                    if shape is None:
+                        shape = image.shape
+                    elif image.shape != shape:
+                        counters.note("image_size_changes", now)
+                        continue
+                    last_image_ns = stamp
+                    frame_data = (now, image, trans, rot)
+                    trans = rot = 0.0
+                    if gt_topic is None:
+                        yield release(frame_data, None)
+                    else:
+                        pending.append(frame_data)
+
+                elif topic == gt_topic:
+                    x, y, th = _ground_truth_pose(msg, gt_type)
+                    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
+                        counters.note("nonfinite_ground_truth", now)
+                        continue
+                    if gt_prev is not None and now < gt_prev[0]:
+                        counters.note("ground_truth_stamps_backwards", now)
+                        continue
+                    current = (now, x, y, th)
+                    while pending and pending[0][0] <= now:
+                        fd = pending.popleft()
+                        if gt_prev is not None and now - gt_prev[0] <= _GT_INTERPOLATION_GAP:
+                            pose = _interpolate(fd[0], gt_prev, current)
+                        elif now - fd[0] <= _GT_HOLD:
+                            pose = (x, y, th)
+                        else:
+                            pose = held(fd[0])
+                        yield release(fd, pose)
+                    gt_prev = current
+
+                # frames that can no longer get a bracketing ground truth
+                while pending and pending[0][0] < now - _GT_INTERPOLATION_GAP:
+                    fd = pending.popleft()
+                    yield release(fd, held(fd[0]))
+            while pending:
+                fd = pending.popleft()
+                yield release(fd, held(fd[0]))
+            if images_seen and not images_decoded:
+                raise BagError(
+                    f"none of the {images_seen} camera images in {self.path} could be decoded as "
+                    "JPEG; check the camera topic"
+                )
+        finally:
+            messages.close()
+            self._iterating = False
+
+    # ------------------------------------------------------------------------------ closing
+    def _cleanup_tmp(self) -> None:
+        if self._tmpdir is not None:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None
+
+    def close(self) -> None:
+        """Close the bag (idempotent)."""
+        if self._reader is not None:
+            try:
+                self._reader.close()
+            except Exception:  # already closed or half open
+                pass
+            self._reader = None
+        self._cleanup_tmp()
+
+    def __enter__(self) -> BagReader:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        self._cleanup_tmp()
+
+
+def open_bag(
+    path: str | Path,
+    topics: BagTopics | None = None,
+    image_scale: int = 1,
+    max_odometry_gap: float = 1.0,
+) -> BagReader:
+    """Open an iRat-layout bag for streaming.
+
+    Args:
+        path: a ROS1 ``.bag`` file (any name) or a ROS2 bag folder / ``.mcap`` / ``.db3``.
+        topics: topic names (default: the iRat 2011 Australia bag's).
+        image_scale: 1, 2, 4 or 8: decode JPEGs at that reduction (fast DCT-domain scaling);
+            images are then ``240/scale x 416/scale`` for iRat frames.
+        max_odometry_gap: longer odometry intervals (s) contribute no motion (counted).
+
+    Raises:
+        BagError: missing file, not a bag, truncated / unindexed / corrupt bag.
+        BagTopicError: a required topic is missing (the message lists those present).
+        BagMessageTypeError: a topic has the wrong message type.
+        ParameterError: bad ``image_scale`` or ``max_odometry_gap``.
+
+    """
+    return BagReader(
+        path, topics=topics, image_scale=image_scale, max_odometry_gap=max_odometry_gap
+    )
