@@ -41,6 +41,7 @@ from cogmap_core.errors import InputFileError
 from cogmap_core.frontend.config import FrontEndConfig
 
 _INITIAL_CAPACITY = 256
+_LEVEL2_MIN = 24  # pairs left after level 1 below which level 2 is skipped
 
 
 @dataclass(frozen=True, slots=True)
@@ -289,8 +290,10 @@ class LocalViewCells:
                 d = self._desc1.reshape(-1, self._k1)[flat] - v1
                 np.abs(d, out=d)
                 found.append(flat[d @ self._ones1 <= bound])
-        flat = np.concatenate(found) if found else np.zeros(0, dtype=np.intp)
-        if len(flat):
+        if not found:
+            return MatchResult(-1, -1, -1, evaluated)
+        flat = found[0] if len(found) == 1 else np.concatenate(found)
+        if len(flat) > _LEVEL2_MIN:  # for a few pairs the exact SAD is as cheap as level 2
             v2 = (self._l2[0] @ fc @ self._l2[1]).ravel()
             d = self._desc2.reshape(-1, self._k2)[flat] - v2
             np.abs(d, out=d)
@@ -409,7 +412,8 @@ class _AreaPlan:
             g += h
             cells = g[1:, 1:] - g[:-1, 1:] - g[1:, :-1] + g[:-1, :-1]
             cells *= self.inv_area
-        return np.clip(np.rint(cells), 0, 255).astype(np.uint8)
+        # Means of 8-bit values lie in [0, 255] up to rounding error far below 0.5: no clipping.
+        return np.rint(cells, out=cells).astype(np.uint8)
 
 
 def _area_weights(edges: NDArray[np.float64], n_in: int) -> NDArray[np.float64]:
