@@ -128,8 +128,13 @@ class IratBagWriter:
         return _T["std_msgs/msg/Header"](seq=seq, stamp=_time(stamp_ns), frame_id=frame_id)
 
     # ----------------------------------------------------------------------------- iRat topics
-    def write_image(self, stamp_ns: int, jpeg: bytes, fmt: str = "jpeg") -> None:
-        """A ``sensor_msgs/CompressedImage`` on the camera topic."""
+    def write_image(
+        self, stamp_ns: int, jpeg: bytes, fmt: str = "jpeg", record_ns: int | None = None
+    ) -> None:
+        """A ``sensor_msgs/CompressedImage`` on the camera topic.
+
+        ``record_ns`` is the bag's record time (default: the header stamp), as for all writers.
+        """
         topic = self.topics.image
         self.connection(topic, IMAGE_TYPE)
         msg = _T[IMAGE_TYPE](
@@ -137,7 +142,7 @@ class IratBagWriter:
             format=fmt,
             data=np.frombuffer(jpeg, dtype=np.uint8),
         )
-        self.write_message(topic, stamp_ns, msg)
+        self.write_message(topic, stamp_ns if record_ns is None else record_ns, msg)
 
     def write_odometry(
         self,
@@ -145,6 +150,7 @@ class IratBagWriter:
         v: float,
         w: float,
         pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        record_ns: int | None = None,
     ) -> None:
         """A ``nav_msgs/Odometry``: ``twist.linear.x = v``, ``twist.angular.z = w``.
 
@@ -161,9 +167,11 @@ class IratBagWriter:
             pose=_T["geometry_msgs/msg/PoseWithCovariance"](pose=_pose(*pose), covariance=_ZERO36),
             twist=_T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=_ZERO36),
         )
-        self.write_message(topic, stamp_ns, msg)
+        self.write_message(topic, stamp_ns if record_ns is None else record_ns, msg)
 
-    def write_ground_truth(self, stamp_ns: int, x: float, y: float, theta: float) -> None:
+    def write_ground_truth(
+        self, stamp_ns: int, x: float, y: float, theta: float, record_ns: int | None = None
+    ) -> None:
         """A ``geometry_msgs/PoseStamped`` on the ground-truth topic."""
         topic = self.topics.ground_truth
         if topic is None:
@@ -171,7 +179,7 @@ class IratBagWriter:
         msg = _T[GROUND_TRUTH_TYPE](
             header=self.header(topic, stamp_ns, self._frame_ids[2]), pose=_pose(x, y, theta)
         )
-        self.write_message(topic, stamp_ns, msg)
+        self.write_message(topic, stamp_ns if record_ns is None else record_ns, msg)
 
     # ------------------------------------------------------------------------------ finishing
     def close(self) -> Path:

@@ -10,7 +10,8 @@ Conventions (those of OpenRatSLAM):
   ``Frame.time`` counts seconds from the bag's first message;
 - odometry: each message contributes ``twist.linear.x * dt`` and ``twist.angular.z * dt`` with
   ``dt`` the header-stamp interval to the previous odometry message; a frame gets everything
-  recorded since the previous frame (the first message only starts the clock);
+  recorded since the previous frame, up to and including its own record time (the first
+  message only starts the clock);
 - ground truth: interpolated between the two poses around the frame time when they are at most
   1 s apart, else the nearest pose within 0.25 s, else ``None``.
 
@@ -249,17 +250,23 @@ class BagReader:
         max_odometry_gap: float = 1.0,
     ) -> None:
         """Open and check the bag; see :func:`open_bag`."""
+        self._tmpdir: Path | None = None
+        self._reader: AnyReader | None = None
+        topics = topics or BagTopics()
+        if len({topics.image, topics.odometry, topics.ground_truth}) < 3:
+            raise ParameterError(
+                f"camera, odometry and ground-truth topics must differ (got {topics.image}, "
+                f"{topics.odometry}, {topics.ground_truth})"
+            )
         if image_scale not in _DECODE_FLAGS:
             raise ParameterError(f"image_scale {image_scale} is not supported; use 1, 2, 4 or 8")
         if not (max_odometry_gap > 0):
             raise ParameterError(f"max_odometry_gap {max_odometry_gap} must be > 0 s")
         self.path = Path(path)
-        self.topics = topics or BagTopics()
+        self.topics = topics
         self.image_scale = image_scale
         self.max_odometry_gap = float(max_odometry_gap)
         self.counters = ReadCounters()
-        self._tmpdir: Path | None = None
-        self._reader: AnyReader | None = None
         self._iterating = False
         self._reader = self._open_reader()
         try:
@@ -356,7 +363,9 @@ class BagReader:
         if counts.get(self.topics.image, 0) == 0:
             raise BagError(f"camera topic {self.topics.image} in {self.path} has no messages")
         self._gt_type = gt_type
-        self._used = [self.topics.image, self.topics.odometry] + ([gt_topic] if gt_type else [])
+        # at equal record times rosbags yields messages in this order: odometry, ground truth,
+        # then the image, so odometry stamped at a frame's time belongs to that frame
+        self._used = [self.topics.odometry, *([gt_topic] if gt_type else []), self.topics.image]
         self._t0_ns = self._first_stamp_ns()
         return BagInfo(
             path=self.path,
