@@ -188,3 +188,28 @@ def test_observe_reports_the_error_of_a_match() -> None:
     result = lv.observe(np.clip(noisy, 0, 255).astype(np.uint8))
     assert result.template_id == 0 and not result.is_new
     assert result.error == pytest.approx(3 / 255)
+
+
+def test_global_normalisation_scales_to_the_target_mean() -> None:
+    lv = LocalViewCells(EXACT.with_changes(vt_normalisation=0.4))
+    image = np.full((240, 420), 50, dtype=np.uint8)
+    assert np.all(lv.make_template(image) == 102)  # 0.4 * 255
+
+
+def test_patch_normalisation_is_local_contrast() -> None:
+    lv = LocalViewCells(EXACT.with_changes(vt_patch_normalise=2))
+    flat = np.full((240, 420), 90, dtype=np.uint8)
+    assert np.all(lv.make_template(flat) == 128)  # no contrast anywhere: 0.5
+    # A vertical edge: dark left half, bright right half, at any overall brightness.
+    for low, high in ((20, 60), (120, 240)):
+        pano = np.full((20, 80), low, dtype=np.uint8)
+        pano[:, 40:] = high
+        t = lv.make_template(view_image(pano, 10)).astype(int)
+        assert np.all(t[:, :28] == 128) and np.all(t[:, 32:] == 128)  # far from the edge
+        # Next to it, (z + 3) / 6 of the 5x5 patch: e.g. column 29 sees 3 dark and 2 bright
+        # columns, mean 0.4, std 0.49: z = -0.816 -> 0.364 -> 93.
+        assert np.all(t[:, 28:32] == [106, 93, 162, 149])
+        if low == 20:
+            first = t
+        else:
+            assert np.array_equal(t, first)  # independent of brightness and contrast

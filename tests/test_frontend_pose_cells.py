@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from cogmap_core.frontend import FrontEndConfig, PoseCellNetwork
+from cogmap_core.frontend import FrontEndConfig, PoseCellExperiences, PoseCellNetwork
 
 CFG = FrontEndConfig()
 CELL = CFG.pc_cell_x_size  # 0.015 m
@@ -166,3 +166,47 @@ def test_injected_energy_pulls_the_packet() -> None:
         net.inject(1.0, 8.0, 3.0, 0.1)
         net.update(0.0, 0.0)
     assert net.distance(net.best, (1.0, 8.0, 3.0)) < 0.5
+
+
+def _injected(pcx: PoseCellExperiences, vt: int, rad: float = 0.0) -> np.ndarray:
+    before = pcx.network.cells.copy()
+    pcx.on_view_template(vt, rad)
+    return pcx.network.cells - before
+
+
+def test_view_cells_inject_energy_as_openratslam() -> None:
+    pcx = PoseCellExperiences(CFG)
+    # Templates 0..11, each first seen at a different pose-cell position (moving +x then +y).
+    for vt in range(12):
+        assert not _injected(pcx, vt).any()  # a new template injects nothing
+        pcx.on_odo(CELL if vt < 6 else 0.0, 0.0)
+        pcx.get_action()
+    cell0 = pcx.network.cells.copy()
+    # Template 5 is among the 10 newest: no energy.
+    assert not _injected(pcx, 5).any()
+    # Template 0 is old enough: energy 0.1 / 30 * (30 - e^(1.2 * 1)) at its cells (5, 5, 18).
+    diff = _injected(pcx, 0)
+    expected = 0.1 / 30.0 * (30.0 - math.exp(1.2))
+    assert diff[18, 5, 5] == pytest.approx(expected)
+    assert np.count_nonzero(diff) == 1
+    # Seen again the next frame: decay 1 - 0.05 restored to 1, + 1 active = 2: less energy.
+    diff = _injected(pcx, 0)
+    assert diff[18, 5, 5] == pytest.approx(0.1 / 30.0 * (30.0 - math.exp(1.2 * 2.0)))
+    # A third time: decay 2 - 0.05 + 1 = 2.95, e^(3.54) > 30: nothing.
+    assert not _injected(pcx, 0).any()
+    assert pcx.view_decay(0) == pytest.approx(2.9)
+    # Away for 20 frames the decay recovers by 0.05 a frame, down to 1.
+    for _ in range(20):
+        pcx.on_view_template(11, 0.0)
+    assert pcx.view_decay(0) == pytest.approx(1.9)
+    assert cell0.sum() == pytest.approx(1.0)
+
+
+def test_injection_is_shifted_by_the_relative_angle() -> None:
+    pcx = PoseCellExperiences(CFG)
+    for vt in range(12):
+        pcx.on_view_template(vt, 0.0)
+    # Template 0 was seen at theta cell 18; the view is turned by -25 degrees: cell 15.5 -> 16.
+    diff = _injected(pcx, 0, math.radians(-25.0))
+    assert np.flatnonzero(diff.reshape(36, -1).any(axis=1)).tolist() == [16]
+    assert pcx.relative_rad == pytest.approx(math.radians(-25.0))

@@ -89,11 +89,11 @@ class MatchResult:
         return self.template_id >= 0
 
 
-def _block_matrix(n: int, block: int) -> NDArray[np.float32]:
+def _block_matrix(n: int, block: int, dtype: type[np.floating[Any]]) -> NDArray[Any]:
     """0/1 matrix ``(n_blocks, n)`` summing consecutive runs of (about) ``block`` elements."""
     count = max(1, round(n / block))
     edges = np.linspace(0, n, count + 1).round().astype(np.intp)
-    m = np.zeros((count, n), dtype=np.float32)
+    m = np.zeros((count, n), dtype=dtype)
     for b in range(count):
         m[b, edges[b] : edges[b + 1]] = 1.0
     return m
@@ -108,8 +108,8 @@ class LocalViewCells:
     of 2x4 blocks) are stored in the same order, column-major, so the level-1 bound of the slice
     is a few contiguous passes. The newest templates (fewer than ``max(64, count / 16)``) are
     scanned directly; when there are more, the sorted arrays are rebuilt. Survivors then face the
-    level-2 bound (4x4-pixel blocks) and the exact SAD. All block sums are integers below 2^24,
-    exact in ``float32``.
+    level-2 bound (4x4-pixel blocks) and the exact SAD. Block sums are integers, exact in
+    ``float32`` (``float64`` for templates so large that a sum could reach 2^24).
     """
 
     def __init__(self, config: FrontEndConfig) -> None:
@@ -129,24 +129,26 @@ class LocalViewCells:
         )
         self._rad_per_column = math.radians(config.camera_hfov_deg) * crop_fraction / self._x
         # Block partitions of the compared window: (row-sum matrix, column-sum matrix^T).
-        self._l1 = (_block_matrix(self._y, 10), _block_matrix(self._width, 13).T.copy())
-        self._l2 = (_block_matrix(self._y, 4), _block_matrix(self._width, 4).T.copy())
+        dt = np.float32 if self._pixels * 255 < 2**24 else np.float64
+        self._dtype = dt
+        self._l1 = (_block_matrix(self._y, 10, dt), _block_matrix(self._width, 13, dt).T.copy())
+        self._l2 = (_block_matrix(self._y, 4, dt), _block_matrix(self._width, 4, dt).T.copy())
         self._k1 = self._l1[0].shape[0] * self._l1[1].shape[1]
         self._k2 = self._l2[0].shape[0] * self._l2[1].shape[1]
-        self._ones1 = np.ones(self._k1, dtype=np.float32)
-        self._ones2 = np.ones(self._k2, dtype=np.float32)
+        self._ones1 = np.ones(self._k1, dtype=dt)
+        self._ones2 = np.ones(self._k2, dtype=dt)
         self._count = 0
         self._capacity = 0
         self._templates = np.zeros((0, self._y, self._x), dtype=np.int16)
         self._sums = np.zeros((0, self._n_off), dtype=np.int32)
-        self._desc1 = np.zeros((0, self._n_off, self._k1), dtype=np.float32)
-        self._desc2 = np.zeros((0, self._n_off, self._k2), dtype=np.float32)
+        self._desc1 = np.zeros((0, self._n_off, self._k1), dtype=dt)
+        self._desc2 = np.zeros((0, self._n_off, self._k2), dtype=dt)
         self._grow(_INITIAL_CAPACITY)
         # Sorted index over the pairs of templates [0, _indexed).
         self._indexed = 0
         self._keys = np.zeros(0, dtype=np.int32)
         self._ids = np.zeros(0, dtype=np.intp)
-        self._sorted1 = np.zeros((self._k1, 0), dtype=np.float32)
+        self._sorted1 = np.zeros((self._k1, 0), dtype=dt)
         self._query = np.zeros(2, dtype=np.int32)
         self._plans: dict[tuple[int, ...], _AreaPlan] = {}
         self.last_match: MatchResult | None = None
@@ -204,7 +206,7 @@ class LocalViewCells:
         index = self._count
         self._templates[index] = tmpl
         windows = np.stack([tmpl[:, o : o + self._width] for o in self._offsets])
-        windows = windows.astype(np.float32)
+        windows = windows.astype(self._dtype)
         self._sums[index] = windows.sum(axis=(1, 2), dtype=np.float64).astype(np.int32)
         self._desc1[index] = (self._l1[0] @ windows @ self._l1[1]).reshape(self._n_off, -1)
         self._desc2[index] = (self._l2[0] @ windows @ self._l2[1]).reshape(self._n_off, -1)
@@ -254,8 +256,8 @@ class LocalViewCells:
         """Best (template, offset) pair within the threshold, by the pruned exact search.
 
         ``hint`` (e.g. the previous frame's template) only speeds the search up: its SAD
-        tightens the bound before the cascade. The result is
-        identical to :meth:`match_exhaustive`.
+        tightens the bound before the cascade. The result is identical to
+        :meth:`match_exhaustive`.
         """
         view = self._check(template)
         count = self._count
@@ -269,7 +271,7 @@ class LocalViewCells:
             sads = np.abs(self._windows[hint] - centre[:, None, :]).sum(axis=(0, 2))
             evaluated += len(sads)
             bound = min(bound, int(sads.min()))
-        fc = centre.astype(np.float32)
+        fc = centre.astype(self._dtype)
         v0 = int(centre.sum(dtype=np.int64))
         v1 = (self._l1[0] @ fc @ self._l1[1]).ravel()
         found: list[NDArray[np.intp]] = []
