@@ -12,10 +12,10 @@ import math
 import os
 import shutil
 import time as wallclock
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -91,6 +91,83 @@ def prepare_out_dir(out_dir: Path, force: bool) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
 
 
+def session_summary(
+    session: SlamSession,
+    dataset: str,
+    first: float,
+    last: float,
+    wall: float,
+    read_warnings: dict[str, Any],
+) -> dict[str, Any]:
+    """The ``summary.json`` of a session: counts, timings and ATE per map, loop-closure score.
+
+    Args:
+        session: the session (its maps and event log).
+        dataset: the bag, as written into the summary.
+        first: data time of the first frame processed (s).
+        last: data time of the last frame processed (s).
+        wall: wall time the processing took (s).
+        read_warnings: the reader's non-zero problem counters.
+
+    """
+    duration = max(last - first, 0.0)
+    maps: dict[str, Any] = {}
+    for mode in MAP_ORDER:
+        cmap = session.maps[mode]
+        entry: dict[str, Any] = optimisation_summary(cmap)
+        ate = session.ate(cmap)
+        entry["ate_m"] = None if ate is None else round(ate, 6)
+        maps[mode.value] = entry
+    score = session.loop_closure_score()
+    if score is None:
+        total = sum(1 for e in session.log.events if type(e).__name__ == "LinkToVertex")
+        loops = {"total": total, "true": None, "false": None, "precision": None}
+    else:
+        loops = {
+            "total": score.total,
+            "true": score.true,
+            "false": score.false,
+            "precision": score.precision,
+        }
+    p = session.params
+    return {
+        "dataset": dataset,
+        "frames": session.log.frames,
+        "data_duration_s": round(duration, 6),
+        "wall_s": round(wall, 6),
+        "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
+        "params": {
+            "alpha": p.alpha,
+            "beta": p.beta,
+            "delta": p.delta,
+            "t_interval": p.t_interval,
+            "t_total": p.t_total,
+        },
+        "maps": maps,
+        "loop_closures": loops,
+        "read_warnings": read_warnings,
+    }
+
+
+def write_sizes_csv(maps: Mapping[MapMode, CognitiveMap], handle: TextIO) -> None:
+    """Write ``sizes.csv``: time and each map's vertices/edges on the union of change times."""
+    histories = {m: maps[m].size_history() for m in MAP_ORDER}
+    times = np.unique(np.concatenate([h[0] for h in histories.values()]))
+    writer = csv.writer(handle)
+    header = ["time"]
+    for m in MAP_ORDER:
+        header += [f"{m.value}_vertices", f"{m.value}_edges"]
+    writer.writerow(header)
+    columns = []
+    for m in MAP_ORDER:
+        t, v, e = histories[m]
+        idx = np.searchsorted(t, times, side="right") - 1
+        columns.append(np.where(idx >= 0, v[np.maximum(idx, 0)], 0))
+        columns.append(np.where(idx >= 0, e[np.maximum(idx, 0)], 0))
+    for row in range(times.size):
+        writer.writerow([f"{times[row]:.6f}"] + [int(c[row]) for c in columns])
+
+
 class HeadlessPipeline:
     """Process a whole bag once and write the report folder."""
 
@@ -143,46 +220,8 @@ class HeadlessPipeline:
         return first, last
 
     def _summary(self, reader: BagReader, first: float, last: float, wall: float) -> dict[str, Any]:
-        session = self.session
-        duration = max(last - first, 0.0)
-        maps: dict[str, Any] = {}
-        for mode in MAP_ORDER:
-            cmap = session.maps[mode]
-            entry: dict[str, Any] = optimisation_summary(cmap)
-            ate = session.ate(cmap)
-            entry["ate_m"] = None if ate is None else round(ate, 6)
-            maps[mode.value] = entry
-        score = session.loop_closure_score()
-        if score is None:
-            total = sum(1 for e in session.log.events if type(e).__name__ == "LinkToVertex")
-            loops = {"total": total, "true": None, "false": None, "precision": None}
-        else:
-            loops = {
-                "total": score.total,
-                "true": score.true,
-                "false": score.false,
-                "precision": score.precision,
-            }
-        p = session.params
-        return {
-            "dataset": str(self.bag),
-            "frames": session.log.frames,
-            "data_duration_s": round(duration, 6),
-            "wall_s": round(wall, 6),
-            "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
-            "params": {
-                "alpha": p.alpha,
-                "beta": p.beta,
-                "delta": p.delta,
-                "t_interval": p.t_interval,
-                "t_total": p.t_total,
-            },
-            "maps": maps,
-            "loop_closures": loops,
-            "read_warnings": {
-                k: v for k, v in asdict(self.counters).items() if k != "frames" and v
-            },
-        }
+        warnings = {k: v for k, v in asdict(self.counters).items() if k != "frames" and v}
+        return session_summary(self.session, str(self.bag), first, last, wall, warnings)
 
     def _write_json(self, name: str, payload: dict[str, Any]) -> None:
         path = self.out_dir / name
@@ -207,23 +246,9 @@ class HeadlessPipeline:
 
     def _write_sizes(self) -> None:
         """sizes.csv: time and the vertices/edges of each map, on the union of change times."""
-        histories = {m: self.session.maps[m].size_history() for m in MAP_ORDER}
-        times = np.unique(np.concatenate([h[0] for h in histories.values()]))
         path = self.out_dir / "sizes.csv"
         with path.open("w", newline="") as handle:
-            writer = csv.writer(handle)
-            header = ["time"]
-            for m in MAP_ORDER:
-                header += [f"{m.value}_vertices", f"{m.value}_edges"]
-            writer.writerow(header)
-            columns = []
-            for m in MAP_ORDER:
-                t, v, e = histories[m]
-                idx = np.searchsorted(t, times, side="right") - 1
-                columns.append(np.where(idx >= 0, v[np.maximum(idx, 0)], 0))
-                columns.append(np.where(idx >= 0, e[np.maximum(idx, 0)], 0))
-            for row in range(times.size):
-                writer.writerow([f"{times[row]:.6f}"] + [int(c[row]) for c in columns])
+            write_sizes_csv(self.session.maps.maps, handle)
         self.files.append(path)
 
     def _write_maps(self) -> None:
