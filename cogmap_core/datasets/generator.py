@@ -292,11 +292,14 @@ def render_frames(
     workers: int | None = None,
     progress: ProgressFn | None = None,
     camera: CameraModel | None = None,
+    min_frames_per_worker: int = _MIN_FRAMES_PER_WORKER,
 ) -> tuple[int, Iterator[bytes]]:
     """Start rendering the plan's frames; returns ``(workers used, iterator of JPEG bytes)``.
 
-    Uses ``workers`` processes (default: all CPUs) when the run is long enough to pay for them,
-    else renders in this process. The iterator yields frames in order.
+    Uses up to ``workers`` processes (default: all CPUs), at most one per
+    ``min_frames_per_worker`` frames (starting a process costs about a second), else renders in
+    this process. The iterator yields frames in order; the output does not depend on the number
+    of processes.
     """
     config = plan.config
     n = len(plan.frame_times)
@@ -305,7 +308,7 @@ def render_frames(
     wanted = workers if workers is not None else (os.cpu_count() or 1)
     if wanted < 1:
         raise ParameterError(f"workers {wanted} must be at least 1")
-    used = max(1, min(wanted, n // _MIN_FRAMES_PER_WORKER))
+    used = max(1, min(wanted, n // max(1, min_frames_per_worker)))
     tasks = [
         (s, plan.frame_poses[s : s + _CHUNK], plan.frame_light[s : s + _CHUNK])
         for s in range(0, n, _CHUNK)
@@ -370,7 +373,7 @@ def maze_picture(plan: DatasetPlan, pixels_per_metre: float = 160.0) -> NDArray[
     k = pixels_per_metre
     w_m, h_m = layout.size_m
     margin = 10
-    width, height = int(w_m * k) + 2 * margin, int(h_m * k) + 2 * margin
+    width, height = round(w_m * k) + 2 * margin, round(h_m * k) + 2 * margin
     img = np.full((height, width, 3), 235, np.uint8)
     cell_px = layout.cell * k
     for r, c in np.argwhere(layout.walls):

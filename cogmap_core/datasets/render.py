@@ -331,6 +331,7 @@ class MazeRenderer:
             distance along the face from its ``p0`` (m), one value per column.
 
         """
+        x, y, theta = float(x), float(y), float(theta)
         ang = theta + self._col_angle
         dx, dy = np.cos(ang), np.sin(ang)
         faces = self.faces
@@ -385,6 +386,7 @@ class MazeRenderer:
     # ----------------------------------------------------------------------------- drawing
     def render_float(self, x: float, y: float, theta: float) -> F32:
         """Noise-free image radiance (about 0..1, brighter lamps exceed 1), ``float32``."""
+        x, y, theta = float(x), float(y), float(theta)  # same result for numpy scalars
         cam = self.camera
         f = np.float32(cam.focal)
         hc = np.float32(cam.mount_height)
