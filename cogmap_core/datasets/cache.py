@@ -43,7 +43,7 @@ def cache_dir() -> Path:
 def default_dataset_name() -> str:
     """File name of the default dataset in the cache."""
     c = DEFAULT_CONFIG
-    return f"{c.layout}_{c.laps}laps_seed{c.seed}_v{DATASET_VERSION}.bag"
+    return f"{Path(c.layout).stem}_{c.laps}laps_seed{c.seed}_v{DATASET_VERSION}.bag"
 
 
 def default_dataset_file() -> Path:
