@@ -379,8 +379,15 @@ def test_wrong_message_type_on_ground_truth_topic(tmp_path: Path) -> None:
         bag.write_image(T0, jpeg(0))
         bag.write_odometry(T0, 0.0, 0.0)
         bag.write_message("/overhead/pose", T0, t["std_msgs/msg/String"](data="x"))
-    with pytest.raises(BagMessageTypeError, match="std_msgs/msg/String; supported"):
-        open_bag(path)
+    with open_bag(path) as reader:  # ground truth is optional: warn, read without it
+        assert not reader.info.has_ground_truth
+        assert reader.info.ground_truth_topic is None
+        assert all(f.ground_truth is None for f in reader.frames())
+        assert reader.warnings == [
+            "ground-truth topic /overhead/pose carries std_msgs/msg/String, not a pose type "
+            "(PoseStamped, Pose, Pose2D, PoseWithCovarianceStamped, Odometry); reading without "
+            "ground truth"
+        ]
 
 
 @pytest.mark.parametrize(

@@ -25,11 +25,12 @@ summarised by :attr:`BagReader.warnings`:
 - odometry stamp earlier than the previous one: skipped; after three in a row the clock is taken
   to have been reset and integration restarts from the new stamps; odometry stamp more than
   ``max_odometry_gap`` after the previous: that interval contributes nothing (motion unknown);
-- ground truth NaN/inf or going backwards: skipped.
+- ground truth NaN/inf or going backwards: skipped; a ground-truth topic that is not a pose type:
+  read without ground truth, with a warning (:attr:`BagReader.open_warnings`).
 
 Errors (:class:`BagError` and subclasses, one line each): missing file, not a bag, truncated,
-unindexed or corrupt bag, missing topic (listing the topics present), wrong message type, a bag
-none of whose images decode.
+unindexed or corrupt bag, missing camera or odometry topic (listing the topics present), wrong
+camera or odometry message type, a bag none of whose images decode.
 """
 
 from __future__ import annotations
@@ -267,6 +268,7 @@ class BagReader:
         self.image_scale = image_scale
         self.max_odometry_gap = float(max_odometry_gap)
         self.counters = ReadCounters()
+        self.open_warnings: list[str] = []
         self._iterating = False
         self._reader = self._open_reader()
         try:
@@ -351,11 +353,15 @@ class BagReader:
         gt_type: str | None = None
         if gt_topic is not None and gt_topic in all_topics:
             gt_type = all_topics[gt_topic]
-            if gt_type not in GROUND_TRUTH_TYPES:
-                raise BagMessageTypeError(
-                    f"ground-truth topic {gt_topic} in {self.path} carries {gt_type}; supported: "
-                    f"{', '.join(GROUND_TRUTH_TYPES)}; choose another topic or none"
+            if gt_type not in GROUND_TRUTH_TYPES:  # optional data: warn and go on without it
+                note = (
+                    f"ground-truth topic {gt_topic} carries {gt_type}, not a pose type "
+                    f"({', '.join(t.split('/')[-1] for t in GROUND_TRUTH_TYPES)}); reading "
+                    "without ground truth"
                 )
+                self.open_warnings.append(note)
+                log.warning("%s", note)
+                gt_type = None
         self._conns: dict[str, list[Connection]] = {}
         for conn in reader.connections:
             self._conns.setdefault(conn.topic, []).append(conn)
@@ -418,8 +424,8 @@ class BagReader:
     # ------------------------------------------------------------------------------- access
     @property
     def warnings(self) -> list[str]:
-        """Summary lines of the problems met in the last pass (empty when all was clean)."""
-        return self.counters.warnings()
+        """Problems found when opening, then those met in the last pass (empty when clean)."""
+        return self.open_warnings + self.counters.warnings()
 
     @property
     def start_stamp(self) -> float:
@@ -649,7 +655,7 @@ def open_bag(
     Raises:
         BagError: missing file, not a bag, truncated / unindexed / corrupt bag.
         BagTopicError: a required topic is missing (the message lists those present).
-        BagMessageTypeError: a topic has the wrong message type.
+        BagMessageTypeError: the camera or odometry topic has the wrong message type.
         ParameterError: bad ``image_scale`` or ``max_odometry_gap``.
 
     """
