@@ -46,7 +46,7 @@ def test_cache_dir_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: P
 
 
 def test_default_dataset_name_describes_it() -> None:
-    assert default_dataset_file().name == "irat_australia_6laps_seed1_v1.bag"
+    assert default_dataset_file().name == "irat_australia_6laps_seed1_v2.bag"
 
 
 def test_default_dataset_is_generated_once_and_reused(

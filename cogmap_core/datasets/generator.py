@@ -363,6 +363,16 @@ def _previews(out: Path, plan: DatasetPlan, camera_jpeg: bytes | None) -> tuple[
     return tuple(written)
 
 
+def preview_frame(plan: DatasetPlan, candidates: int = 80) -> int:
+    """Index of a frame worth showing: the longest view down a corridor in the first lap."""
+    end = plan.trajectory.lap_times[1] if len(plan.trajectory.lap_times) > 1 else np.inf
+    first_lap = int(np.searchsorted(plan.frame_times, end))
+    indices = np.unique(np.linspace(0, max(first_lap - 1, 0), candidates).astype(np.int64))
+    renderer = MazeRenderer(plan.layout)
+    depth = [float(np.median(renderer.cast(*plan.frame_poses[i])[0])) for i in indices]
+    return int(indices[int(np.argmax(depth))])
+
+
 def maze_picture(plan: DatasetPlan, pixels_per_metre: float = 160.0) -> NDArray[np.uint8]:
     """A colour picture of the maze with the true and the dead-reckoned paths.
 
@@ -454,7 +464,7 @@ def generate_maze_bag(
     plan = plan_dataset(config)
     writer = IratBagWriter(out, overwrite=overwrite)
     used, images = render_frames(plan, workers=workers, progress=progress)
-    preview_index = int(np.searchsorted(plan.frame_times, min(20.0, plan.frame_times[-1] / 3)))
+    preview_index = preview_frame(plan) if preview else -1
     preview_jpeg: bytes | None = None
     odom_times, gt_times = plan.odom_times, plan.gt_times
     to_ns = 1e9
