@@ -1,0 +1,135 @@
+"""``cogmap serve [BAG]``: the live web app -- replay a bag, tune the compact map in a browser."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+import threading
+import webbrowser
+from pathlib import Path
+from types import FrameType
+
+from app.cmd_run import add_map_arguments, params_from_args
+from app.server.replay import BagSource, GenerationProgress
+from cogmap_core.errors import InputFileError, ParameterError
+
+DEFAULT_PORT = 8080
+
+
+def default_dataset(progress: GenerationProgress) -> Path:
+    """The built-in dataset (generated into the cache on first use, with progress)."""
+    try:
+        from cogmap_core.datasets.cache import default_dataset_path
+    except ImportError as exc:
+        raise InputFileError(
+            f"the built-in dataset is not available in this installation ({exc}); "
+            "give a bag: cogmap serve BAG"
+        ) from None
+    return default_dataset_path(progress=progress)
+
+
+def _speed(text: str) -> float:
+    if text in ("max", "inf"):
+        return float("inf")
+    try:
+        value = float(text.rstrip("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"speed {text!r} is not a number or 'max'") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"speed {text} must be > 0")
+    return value
+
+
+def display_url(host: str, port: int) -> str:
+    """The URL to open for a server bound to ``host``:``port``."""
+    if host in ("0.0.0.0", "::", ""):
+        host = "localhost"
+    if ":" in host:
+        host = f"[{host}]"
+    return f"http://{host}:{port}"
+
+
+def _serve(args: argparse.Namespace) -> int:
+    params = params_from_args(args)  # validate before starting anything
+    if not 0 < args.port < 65536:
+        raise ParameterError(f"port {args.port} is out of range; use 1-65535")
+    import viser
+
+    from app.server.app import CogmapApp
+
+    bag: BagSource = Path(args.bag) if args.bag is not None else default_dataset
+    with contextlib.redirect_stdout(sys.stderr):  # viser's banner: keep stdout for our URL
+        server = viser.ViserServer(host=args.host, port=args.port, label="cogmap")
+    port = server.get_port()
+    if port != args.port:
+        print(f"cogmap serve: port {args.port} is busy; using {port}", file=sys.stderr)
+    url = display_url(args.host, port)
+    app = CogmapApp(
+        server,
+        bag,
+        params=params,
+        speed=args.speed,
+        autoplay=not args.paused,
+        static_dir=Path(args.static) if args.static else None,
+    )
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    previous = signal.signal(signal.SIGTERM, on_signal)
+    try:
+        app.start()
+        print(f"cogmap serve: {url}  (Ctrl-C to stop)", flush=True)
+        if args.open:
+            threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()
+        while not stop.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        print("cogmap serve: stopping", file=sys.stderr, flush=True)
+        app.stop()
+        server.stop()
+    print("cogmap serve: stopped", file=sys.stderr, flush=True)
+    return 0
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``cogmap serve``."""
+    parser = subparsers.add_parser(
+        "serve",
+        help="live web app: replay a bag in the browser and tune the compact map live",
+        description="Start a viser web server that replays the bag (default: the built-in "
+        "dataset) through the SLAM core and streams the standard, scene_integration and compact "
+        "maps live to every connected browser, with sliders to tune the map parameters.",
+    )
+    parser.add_argument("bag", nargs="?", default=None, metavar="BAG", help="iRat-layout ROS bag")
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)"
+    )
+    parser.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_PORT,
+        help=f"port (default {DEFAULT_PORT}; the next free one is used when it is busy)",
+    )
+    parser.add_argument("--open", action="store_true", help="open the page in a web browser")
+    parser.add_argument(
+        "--speed",
+        type=_speed,
+        default=1.0,
+        help="playback speed: data seconds per second, or 'max' (default 1)",
+    )
+    parser.add_argument("--paused", action="store_true", help="start paused")
+    parser.add_argument(
+        "--static",
+        default=None,
+        metavar="DIR",
+        help="folder of web-facing assets; HTML replays go to DIR/replays (default: static/)",
+    )
+    add_map_arguments(parser)
+    parser.set_defaults(func=_serve)

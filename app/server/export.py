@@ -1,0 +1,223 @@
+"""Exports of the web app: map as g2o, summary.json, sizes.csv, a self-contained HTML replay.
+
+The summary and sizes are those of ``cogmap run`` (:func:`app.pipeline.session_summary`,
+:func:`app.pipeline.write_sizes_csv`) for the frames replayed so far. The HTML replay is made by
+replaying the cached front-end events into fresh maps on a private viser server whose scene
+serializer records the incremental updates (with pauses between key frames); the resulting page
+plays the map growing, with optimisations, with no server behind it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+import socket
+import tempfile
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+
+from app.pipeline import session_summary, write_sizes_csv
+from app.server.scene import SceneStreamer
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.errors import InputFileError
+from cogmap_core.events import LinkToVertex, MapEvent, Odometry
+from cogmap_core.g2o import format_g2o
+from cogmap_core.slam import EventLog, SlamSession
+
+if TYPE_CHECKING:
+    from app.server.replay import Replay
+
+#: Key frames of an HTML replay and its playing time.
+REPLAY_KEYFRAMES = 240
+REPLAY_SECONDS = 40.0
+_EMBED_MARKER = "__VISER_EMBED_DATA__"
+
+
+def find_static_dir() -> Path:
+    """``static/`` of the source tree when running from it, else ``./static``."""
+    source = Path(__file__).resolve().parents[2] / "static"
+    return source if source.is_dir() else Path("static")
+
+
+def default_replay_path(static_dir: Path | None, mode: MapMode) -> Path:
+    """Where "save HTML replay" writes by default: ``static/replays/cogmap-replay-<map>.html``."""
+    base = static_dir if static_dir is not None else find_static_dir()
+    return base / "replays" / f"cogmap-replay-{mode.value}.html"
+
+
+def g2o_bytes(cmap: CognitiveMap) -> bytes:
+    """The map as g2o text (``VERTEX_SE2``, ``FIX``, ``EDGE_SE2``)."""
+    return "".join(format_g2o(cmap.to_pose_graph())).encode()
+
+
+def truncated_log(log: EventLog, frames: int) -> EventLog:
+    """A copy of the first ``frames`` frames of ``log``."""
+    frames = max(0, min(frames, log.frames))
+    end = log.frame_end[frames - 1] if frames else 0
+    events = list(log.events[:end])
+    links = sum(1 for e in events if isinstance(e, LinkToVertex))
+    truth = log.ground_truth[:frames] if log.has_ground_truth() else list(log.ground_truth)
+    return EventLog(
+        events=events,
+        frame_end=list(log.frame_end[:frames]),
+        frame_time=list(log.frame_time[:frames]),
+        ground_truth=list(truth),
+        link_robot_truth=list(log.link_robot_truth[:links]),
+    )
+
+
+def view_session(replay: Replay) -> SlamSession:
+    """A session holding the replay's current maps and the log up to its current frame.
+
+    Call with ``replay.lock`` held.
+    """
+    source = replay.session
+    view = SlamSession(source.params, replay.frontend_config, source.modes)
+    view.log = truncated_log(source.log, replay.cursor)
+    view.maps.maps = dict(source.maps.maps)
+    view.finished = replay.at_end
+    return view
+
+
+def summary_dict(replay: Replay) -> dict[str, object]:
+    """``summary.json`` of the frames replayed so far (call with ``replay.lock`` held)."""
+    view = view_session(replay)
+    times = view.log.frame_time
+    first = times[0] if times else 0.0
+    last = times[-1] if times else 0.0
+    warnings: dict[str, object] = {}
+    if replay.reader is not None:
+        counters = replay.reader.counters
+        warnings = {k: v for k, v in asdict(counters).items() if k != "frames" and v}
+    dataset = str(replay.bag_path) if replay.bag_path is not None else ""
+    return session_summary(view, dataset, first, last, replay.processing_s, warnings)
+
+
+def summary_bytes(replay: Replay) -> bytes:
+    """``summary.json`` as bytes (call with ``replay.lock`` held)."""
+    return (json.dumps(summary_dict(replay), indent=2) + "\n").encode()
+
+
+def sizes_csv_bytes(replay: Replay) -> bytes:
+    """``sizes.csv`` of the current maps (call with ``replay.lock`` held)."""
+    handle = io.StringIO(newline="")
+    write_sizes_csv(replay.session.maps.maps, handle)
+    return handle.getvalue().encode()
+
+
+# ---------------------------------------------------------------------------------- HTML replay
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def _dead_reckoning_extent(events: Sequence[MapEvent]) -> tuple[float, float, float, float]:
+    """Bounding box of the odometry path (where the maps will be, before corrections)."""
+    odo = [(e.translation, e.rotation) for e in events if isinstance(e, Odometry)]
+    if not odo:
+        return (-1.0, 1.0, -1.0, 1.0)
+    arr = np.asarray(odo)
+    heading = np.cumsum(arr[:, 1])
+    x = np.cumsum(arr[:, 0] * np.cos(heading))
+    y = np.cumsum(arr[:, 0] * np.sin(heading))
+    return float(x.min()), float(x.max()), float(y.min()), float(y.max())
+
+
+def html_replay(
+    log: EventLog,
+    params: MapParams,
+    modes: Sequence[MapMode],
+    finish: bool,
+    keyframes: int = REPLAY_KEYFRAMES,
+    seconds: float = REPLAY_SECONDS,
+) -> str:
+    """A self-contained HTML page replaying the maps ``modes`` built from ``log``.
+
+    The events are applied to fresh maps with ``params``; after every key frame the scene is
+    updated incrementally on a private viser server, whose serializer records it with a pause,
+    so that the whole session plays in about ``seconds``.
+    """
+    modes = tuple(modes)
+    with contextlib.redirect_stdout(io.StringIO()):  # viser prints its URL banner
+        server = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
+    try:
+        streamer = SceneStreamer(server, modes)
+        streamer.show(modes)
+        x0, x1, y0, y1 = _dead_reckoning_extent(log.events)
+        span = max(x1 - x0, y1 - y0, 1.0) * (len(modes) + 1) / 2
+        cx, cy = (x0 + x1) / 2 + (len(modes) - 1) * (x1 - x0 + 0.5) / 2, (y0 + y1) / 2
+        server.initial_camera.position = (cx, cy - 0.05 * span, 1.25 * span + 0.5)
+        server.initial_camera.look_at = (cx, cy, 0.0)
+        serializer = server.get_scene_serializer()
+        maps = {m: CognitiveMap(m, params) for m in modes}
+        n = log.frames
+        step = max(1, math.ceil(n / max(1, keyframes)))
+        pause = seconds / max(1, math.ceil(n / step))
+        truth = log.ground_truth if log.has_ground_truth() else None
+        done = 0
+        for k in range(step, n + step, step):
+            k = min(k, n)
+            end = log.frame_end[k - 1]
+            for cmap in maps.values():
+                cmap.apply_all(log.events[done:end])
+            done = end
+            if k == n and finish:
+                for cmap in maps.values():
+                    cmap.finish(log.frame_time[-1])
+            streamer.publish(maps, truth, k)
+            serializer.insert_sleep(pause)
+        return serializer.as_html()
+    finally:
+        server.stop()
+
+
+def save_html_replay(
+    replay: Replay,
+    modes: Sequence[MapMode],
+    path: Path,
+    keyframes: int = REPLAY_KEYFRAMES,
+    seconds: float = REPLAY_SECONDS,
+) -> Path:
+    """Write the HTML replay of ``replay`` up to its current frame to ``path`` (atomically).
+
+    Raises:
+        InputFileError: ``path`` does not end in ``.html`` or its folder cannot be made.
+
+    """
+    path = Path(path)
+    if path.suffix.lower() not in (".html", ".htm"):
+        raise InputFileError(f"{path}: an HTML replay must be saved as a .html file")
+    if path.exists() and not path.is_file():
+        raise InputFileError(f"{path} exists and is not a file; choose another path")
+    if path.exists() and _EMBED_MARKER not in path.read_text(encoding="utf-8", errors="replace"):
+        raise InputFileError(f"{path} exists and is not a cogmap replay; choose another path")
+    with replay.lock:
+        log = truncated_log(replay.session.log, replay.cursor)
+        params = replay.session.params
+        finish = replay.at_end
+    if log.frames == 0:
+        raise InputFileError("nothing replayed yet: play some frames before saving a replay")
+    page = html_replay(log, params, modes, finish, keyframes, seconds)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise InputFileError(f"cannot write {path}: {exc.strerror}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(page)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

@@ -1,0 +1,634 @@
+"""The replay worker: one thread that owns the SLAM session and replays the bag through it.
+
+The worker reads frames at the playback speed and feeds them to a
+:class:`~cogmap_core.slam.SlamSession`. Every other thread (GUI callbacks of any number of clients)
+only *requests* things -- new map parameters, play/pause, speed, step, restart, seek -- by setting
+a field under a condition variable; the latest request wins, so a storm of slider events never
+queues work: a rebuild in progress is abandoned as soon as a newer parameter set arrives.
+
+The front end runs once per frame of the bag; its events are cached in the session's log. Frames
+the front end has already seen are replayed from that cache (restart, seek backwards, parameter
+changes), so the maps depend only on the data and the parameters, never on playback speed or on
+when a slider moved. The bag is re-read only for the camera images of cached frames.
+
+Listeners are called from the worker thread only (:class:`ReplayListener`); everything that reads
+the maps from another thread takes :attr:`Replay.lock`.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Protocol
+
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.datasets import BagReader, open_bag
+from cogmap_core.errors import CogmapError
+from cogmap_core.frames import Frame
+from cogmap_core.frontend import FrontEndConfig
+from cogmap_core.slam import ALL_MODES, SlamSession
+
+GenerationProgress = Callable[[int, int], None]
+BagSource = Path | Callable[[GenerationProgress], Path]
+
+#: Events applied between two checks for a newer request during a rebuild.
+REBUILD_CHUNK = 1000
+#: A replay that falls further behind its schedule than this (s) re-anchors instead of racing.
+MAX_LAG_S = 1.0
+_TIME_TOLERANCE = 1e-6
+
+
+class PlaybackState(StrEnum):
+    """What the worker is doing."""
+
+    LOADING = "loading"
+    PLAYING = "playing"
+    PAUSED = "paused"
+    ENDED = "ended"
+    ERROR = "error"
+
+
+class ReplayListener(Protocol):
+    """Receives the worker's updates, always on the worker thread."""
+
+    def on_status(self, replay: Replay) -> None:
+        """The playback state, message or position changed."""
+
+    def on_frame(self, replay: Replay, frame: Frame, view_template: int | None) -> None:
+        """A frame was replayed (its camera image and matched view template)."""
+
+    def on_maps(self, replay: Replay, modes: tuple[MapMode, ...], forced: bool) -> None:
+        """The maps ``modes`` changed; ``forced``: show it now (not rate-limited)."""
+
+
+@dataclass
+class RebuildRecord:
+    """Timing of one parameter rebuild (for the latency benchmark and the page's log).
+
+    Attributes:
+        params: the parameters rebuilt for.
+        frames: frames replayed from the cache.
+        requested: ``time.perf_counter()`` when the parameters were requested.
+        compute_s: rebuild time of each map (s).
+        published: ``time.perf_counter()`` when each map was handed to the listener.
+        completed: all maps rebuilt (False: abandoned for newer parameters).
+
+    """
+
+    params: MapParams
+    frames: int
+    requested: float
+    compute_s: dict[MapMode, float] = field(default_factory=dict)
+    published: dict[MapMode, float] = field(default_factory=dict)
+    completed: bool = False
+
+    def latency(self, mode: MapMode) -> float | None:
+        """Seconds from the request to map ``mode`` being shown (None if it never was)."""
+        at = self.published.get(mode)
+        return None if at is None else at - self.requested
+
+
+class _Interrupted(Exception):
+    """A newer request arrived during a rebuild."""
+
+
+class Replay:
+    """Replays one bag through a :class:`SlamSession` on a worker thread.
+
+    Args:
+        bag: the bag, or a function that produces it given a progress callback (the built-in
+            dataset, generated on first use).
+        listener: receives updates (on the worker thread).
+        params: initial map parameters.
+        frontend: front-end configuration.
+        image_scale: JPEG decode reduction (1, 2, 4, 8).
+        speed: playback speed (data seconds per wall second; ``math.inf``: as fast as possible).
+        autoplay: start playing as soon as the bag is open.
+        priority: maps rebuilt first after a parameter change (the displayed ones).
+
+    """
+
+    def __init__(
+        self,
+        bag: BagSource,
+        listener: ReplayListener,
+        params: MapParams | None = None,
+        frontend: FrontEndConfig | None = None,
+        image_scale: int = 4,
+        speed: float = 1.0,
+        autoplay: bool = True,
+        priority: tuple[MapMode, ...] = (MapMode.COMPACT,),
+    ) -> None:
+        """Set up the replay (nothing is read until :meth:`start`)."""
+        self.bag_source = bag
+        self.listener = listener
+        self.frontend_config = frontend
+        self.image_scale = image_scale
+        self.lock = threading.RLock()
+        self._cond = threading.Condition()
+        self._thread: threading.Thread | None = None
+        # requests (guarded by _cond)
+        self._target_params = params or MapParams()
+        self._params_request: float | None = None  # perf_counter of the pending params request
+        self._seek_request: float | None = None
+        self._restart_request = False
+        self._step_request = 0
+        self._playing = autoplay
+        self._speed = speed
+        self._priority: tuple[MapMode, ...] = priority
+        self._stopping = False
+        self._generation = 0  # bumped by every request that should interrupt a rebuild
+        # worker-owned state (read by others under `lock`)
+        self.session = SlamSession(self._target_params, frontend)
+        self.cursor = 0  # frames applied to the maps
+        self.at_end = False
+        self.state = PlaybackState.LOADING
+        self.message = "opening the bag"
+        self.bag_path: Path | None = None
+        self.reader: BagReader | None = None
+        self.duration = 0.0
+        self.total_frames = 0
+        self.view_templates: list[int | None] = []
+        self.rebuilds: list[RebuildRecord] = []
+        self.frame_time = math.nan  # data time of the last frame applied
+        self.processing_s = 0.0  # wall time spent applying frames (front end + maps)
+        self._frames: Iterator[Frame] | None = None
+        self._next: Frame | None = None
+        self._anchor: tuple[float, float] | None = None  # (wall, data time)
+        self._fast_forward_to: float | None = None
+        self._busy = 0  # 1 while the worker handles a request or a frame
+
+    # ================================================================== requests (any thread)
+    def start(self) -> None:
+        """Start the worker thread."""
+        self._thread = threading.Thread(target=self._run, name="cogmap-replay", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Stop the worker (abandoning any rebuild) and close the bag."""
+        with self._cond:
+            self._stopping = True
+            self._generation += 1
+            self._cond.notify_all()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        """Whether the worker thread runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def set_params(self, params: MapParams) -> None:
+        """Rebuild the maps for ``params`` (the latest call wins)."""
+        with self._cond:
+            self._target_params = params
+            self._params_request = time.perf_counter()
+            self._generation += 1
+            self._cond.notify_all()
+
+    @property
+    def params(self) -> MapParams:
+        """The parameters the maps are (being) built with."""
+        return self._target_params
+
+    def play(self) -> None:
+        """Play from the current position."""
+        with self._cond:
+            self._playing = True
+            self._anchor = None
+            self._cond.notify_all()
+
+    def pause(self) -> None:
+        """Pause after the current frame."""
+        with self._cond:
+            self._playing = False
+            self._cond.notify_all()
+
+    @property
+    def playing(self) -> bool:
+        """Whether playback is on (it may be waiting for a rebuild or at the end)."""
+        return self._playing
+
+    def set_speed(self, speed: float) -> None:
+        """Playback speed: data seconds per wall second (``math.inf``: as fast as possible)."""
+        if not (speed > 0):
+            raise ValueError(f"speed {speed} must be > 0")
+        with self._cond:
+            self._speed = speed
+            self._anchor = None
+            self._cond.notify_all()
+
+    @property
+    def speed(self) -> float:
+        """Playback speed."""
+        return self._speed
+
+    def step(self, frames: int = 1) -> None:
+        """Pause and replay ``frames`` more frames."""
+        with self._cond:
+            self._playing = False
+            self._step_request += frames
+            self._cond.notify_all()
+
+    def restart(self) -> None:
+        """Back to the first frame (re-opening the bag after an error)."""
+        with self._cond:
+            self._restart_request = True
+            self._seek_request = None
+            self._generation += 1
+            self._cond.notify_all()
+
+    def seek(self, data_time: float) -> None:
+        """Jump to data time ``data_time`` (s); the latest call wins."""
+        if not math.isfinite(data_time):
+            raise ValueError(f"seek time {data_time} is not finite")
+        with self._cond:
+            self._seek_request = max(0.0, float(data_time))
+            self._generation += 1
+            self._cond.notify_all()
+
+    def set_priority(self, modes: tuple[MapMode, ...]) -> None:
+        """Maps to rebuild first after a parameter change (the displayed ones)."""
+        with self._cond:
+            self._priority = tuple(modes)
+
+    def wait_idle(self, timeout: float = 60.0) -> bool:
+        """Wait until no request is pending and playback is paused or ended (tests)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self._cond:
+                idle = (
+                    self._params_request is None
+                    and self._seek_request is None
+                    and not self._restart_request
+                    and self._step_request == 0
+                    and self._fast_forward_to is None
+                    and (
+                        not self._playing
+                        or self.state in (PlaybackState.ENDED, PlaybackState.ERROR)
+                    )
+                    and self.state is not PlaybackState.LOADING
+                    and self._busy == 0
+                )
+            if idle:
+                return True
+            time.sleep(0.01)
+        return False
+
+    # ================================================================== worker
+    def _run(self) -> None:
+        self._busy = 1
+        try:
+            self._open()
+        finally:
+            self._busy = 0
+        while True:
+            with self._cond:
+                if self._stopping:
+                    break
+                restart = self._restart_request
+                seek = self._seek_request
+                params_pending = self._params_request is not None
+                stepping = self._step_request > 0
+                run = self._playing or stepping or self._fast_forward_to is not None
+                can_run = self.state not in (PlaybackState.ERROR, PlaybackState.LOADING)
+                if not (restart or seek is not None or params_pending) and not (
+                    run and can_run and not self.at_end
+                ):
+                    if self.at_end or not can_run:
+                        self._step_request = 0
+                        self._fast_forward_to = None
+                    self._update_state_locked()
+                    self._cond.wait(0.25)
+                    continue
+                self._busy = 1
+            try:
+                if restart:
+                    self._do_restart()
+                elif seek is not None:
+                    self._do_seek()
+                elif params_pending:
+                    self._do_rebuild()
+                else:
+                    self._do_advance(stepping)
+            except _Interrupted:
+                pass
+            except CogmapError as exc:
+                self._fail(str(exc))
+            except Exception as exc:  # a bug must not take the server down
+                traceback.print_exc(file=sys.stderr)
+                self._fail(f"internal error: {type(exc).__name__}: {exc}")
+            finally:
+                self._busy = 0
+        self._close_pass()
+        if self.reader is not None:
+            self.reader.close()
+
+    def _update_state_locked(self) -> None:
+        state = self.state
+        if state in (PlaybackState.ERROR, PlaybackState.LOADING):
+            return
+        new = (
+            PlaybackState.ENDED
+            if self.at_end
+            else (PlaybackState.PLAYING if self._playing else PlaybackState.PAUSED)
+        )
+        if new is not state:
+            self.state = new
+            self._notify_status()
+
+    def _notify_status(self) -> None:
+        try:
+            self.listener.on_status(self)
+        except Exception:  # a listener problem must not stop the replay
+            traceback.print_exc(file=sys.stderr)
+
+    def _notify_maps(self, modes: tuple[MapMode, ...], forced: bool) -> None:
+        try:
+            self.listener.on_maps(self, modes, forced)
+        except Exception:
+            traceback.print_exc(file=sys.stderr)
+
+    def _fail(self, message: str) -> None:
+        self._close_pass()
+        with self._cond:
+            self.state = PlaybackState.ERROR
+            self.message = message
+            self._fast_forward_to = None
+            self._step_request = 0
+        print(f"cogmap serve: error: {message}", file=sys.stderr)
+        self._notify_status()
+        self._notify_maps(ALL_MODES, True)
+
+    # ------------------------------------------------------------------ opening
+    def _open(self) -> None:
+        self.state = PlaybackState.LOADING
+        self.message = "opening the bag"
+        self._notify_status()
+        try:
+            path = self._resolve_bag()
+            self.bag_path = path
+            reader = open_bag(path, image_scale=self.image_scale)
+        except CogmapError as exc:
+            self._fail(str(exc))
+            return
+        except Exception as exc:
+            traceback.print_exc(file=sys.stderr)
+            self._fail(f"cannot open the bag: {type(exc).__name__}: {exc}")
+            return
+        with self.lock:
+            if self.reader is not None:
+                self.reader.close()
+            self.reader = reader
+            self.duration = reader.info.duration
+            self.total_frames = reader.info.frame_count
+        self.message = ""
+        self._start_pass(0.0)
+        with self._cond:
+            self.state = PlaybackState.PLAYING if self._playing else PlaybackState.PAUSED
+        self._notify_status()
+        self._notify_maps(ALL_MODES, True)
+
+    def _resolve_bag(self) -> Path:
+        source = self.bag_source
+        if isinstance(source, Path):
+            return source
+
+        def progress(done: int, total: int) -> None:
+            self.message = f"generating the built-in dataset: {done}/{total} frames"
+            self._notify_status()
+
+        self.message = "preparing the built-in dataset"
+        self._notify_status()
+        return source(progress)
+
+    def _start_pass(self, start_time: float) -> None:
+        self._close_pass()
+        assert self.reader is not None
+        self._frames = self.reader.frames(start_time)
+        self._next = None
+        self._anchor = None
+
+    def _close_pass(self) -> None:
+        frames = self._frames
+        self._frames = None
+        self._next = None
+        if frames is not None and hasattr(frames, "close"):
+            frames.close()  # type: ignore[attr-defined]
+
+    # ------------------------------------------------------------------ playback
+    def _peek(self) -> Frame | None:
+        if self._next is None and self._frames is not None:
+            self._next = next(self._frames, None)
+        return self._next
+
+    def _do_advance(self, stepping: bool) -> None:
+        frame = self._peek()
+        if frame is None:
+            self._finish_pass()
+            return
+        with self._cond:
+            fast = self._fast_forward_to is not None
+            speed = math.inf if (fast or stepping) else self._speed
+            if math.isfinite(speed):
+                now = time.perf_counter()
+                if self._anchor is None:
+                    self._anchor = (now, frame.time)
+                wall0, data0 = self._anchor
+                delay = wall0 + (frame.time - data0) / speed - now
+                if delay > 0:
+                    self._cond.wait(delay)
+                    return  # re-check requests; the frame stays peeked
+                if delay < -MAX_LAG_S:
+                    self._anchor = (now, frame.time)
+        self._apply_frame(frame)
+        self._next = None
+        with self._cond:
+            if stepping and self._step_request > 0:
+                self._step_request -= 1
+            if self._fast_forward_to is not None and frame.time >= self._fast_forward_to:
+                self._fast_forward_to = None
+                fast = False
+                self._anchor = None
+        forced = stepping or not (self._playing or fast)
+        self._notify_maps(ALL_MODES, forced)
+        self._notify_status()
+
+    def _apply_frame(self, frame: Frame) -> None:
+        session = self.session
+        log = session.log
+        started = time.perf_counter()
+        with self.lock:
+            k = self.cursor
+            if k < log.frames:
+                expected = log.frame_time[k]
+                if abs(frame.time - expected) > _TIME_TOLERANCE:
+                    raise CogmapError(
+                        f"the bag changed while replaying: frame {k} is at {frame.time:.6f} s, "
+                        f"the cache has it at {expected:.6f} s; restart the server"
+                    )
+                lo = log.frame_end[k - 1] if k else 0
+                for event in log.events[lo : log.frame_end[k]]:
+                    session.maps.apply(event)
+                view = self.view_templates[k]
+            else:
+                out = session.process(frame)
+                self.view_templates.append(out.view_template)
+                view = out.view_template
+            self.cursor = k + 1
+            self.frame_time = frame.time
+            self.processing_s += time.perf_counter() - started
+        try:
+            self.listener.on_frame(self, frame, view)
+        except Exception:
+            traceback.print_exc(file=sys.stderr)
+
+    def _finish_pass(self) -> None:
+        session = self.session
+        started = time.perf_counter()
+        with self.lock:
+            if self.cursor == session.log.frames:
+                session.finish()
+            elif self.cursor:
+                session.maps.finish(session.log.frame_time[self.cursor - 1])
+            self.at_end = True
+            self.processing_s += time.perf_counter() - started
+        self._close_pass()
+        with self._cond:
+            self._fast_forward_to = None
+            self._step_request = 0
+        self._update_state_locked()
+        self._notify_maps(ALL_MODES, True)
+        self._notify_status()
+
+    # ------------------------------------------------------------------ restart, seek
+    def _do_restart(self) -> None:
+        with self._cond:
+            self._restart_request = False
+            self._fast_forward_to = None
+        if self.reader is None or self.state is PlaybackState.ERROR:
+            with self._cond:
+                self.state = PlaybackState.LOADING
+            if self.reader is None:
+                self._open()
+                return
+        self._seek_to_frame(0)
+
+    def _do_seek(self) -> None:
+        with self._cond:
+            target = self._seek_request
+            self._seek_request = None
+            self._fast_forward_to = None
+        assert target is not None
+        if self.reader is None:
+            return
+        if self.state is PlaybackState.ERROR:  # seeking re-reads the bag, like a restart
+            with self._cond:
+                self.state = PlaybackState.LOADING
+        log = self.session.log
+        cached_end = log.frame_time[-1] if log.frames else -math.inf
+        try:
+            if target <= cached_end or self.session.finished:
+                self._seek_to_frame(bisect.bisect_right(log.frame_time, target))
+            else:
+                # Beyond what the front end has seen: replay the cache to its end, then run the
+                # front end as fast as possible up to the target.
+                if self.cursor < log.frames or self.at_end:
+                    self._seek_to_frame(log.frames)
+                with self._cond:
+                    self._fast_forward_to = target
+        except _Interrupted:
+            with self._cond:
+                if self._seek_request is None and not self._restart_request:
+                    self._seek_request = target  # interrupted by parameters: seek again
+            raise
+
+    def _seek_to_frame(self, k: int) -> None:
+        """Rebuild the maps up to frame ``k`` from the cache and continue reading from there."""
+        with self._cond:
+            generation = self._generation
+            params = self._target_params
+            self._params_request = None
+        log = self.session.log
+        k = max(0, min(k, log.frames))
+        maps = {mode: self._build_map(mode, params, k, False, generation) for mode in self._order()}
+        with self.lock:
+            self.session.adopt(params, maps)
+            self.session.finished = False
+            if k == 0:
+                self.processing_s = 0.0
+            self.cursor = k
+            self.at_end = False
+            self.frame_time = log.frame_time[k - 1] if k else math.nan
+        if self.state is not PlaybackState.ERROR:
+            if k < log.frames:
+                self._start_pass(max(0.0, log.frame_time[k] - 1e-3) if k else 0.0)
+            else:
+                self._start_pass(min(log.frame_time[k - 1] + 1e-4, self.duration) if k else 0.0)
+        with self._cond:
+            if self.state is PlaybackState.LOADING:
+                self.state = PlaybackState.PAUSED
+            self.message = ""
+        self._update_state_locked()
+        self._notify_maps(ALL_MODES, True)
+        self._notify_status()
+
+    # ------------------------------------------------------------------ parameter rebuilds
+    def _order(self) -> tuple[MapMode, ...]:
+        first = tuple(m for m in self._priority if m in self.session.modes)
+        return first + tuple(m for m in self.session.modes if m not in first)
+
+    def _build_map(
+        self, mode: MapMode, params: MapParams, frames: int, finish: bool, generation: int
+    ) -> CognitiveMap:
+        """What ``SlamSession.rebuild`` does for one map, abandoned when a newer request comes."""
+        log = self.session.log
+        end = log.frame_end[frames - 1] if frames else 0
+        cmap = CognitiveMap(mode, params)
+        for lo in range(0, end, REBUILD_CHUNK):
+            if self._generation != generation:
+                raise _Interrupted
+            cmap.apply_all(log.events[lo : min(lo + REBUILD_CHUNK, end)])
+        if finish and frames:
+            cmap.finish(log.frame_time[frames - 1])
+        if self._generation != generation:
+            raise _Interrupted
+        return cmap
+
+    def _do_rebuild(self) -> None:
+        with self._cond:
+            params = self._target_params
+            requested = self._params_request
+            self._params_request = None
+            generation = self._generation
+        assert requested is not None
+        frames = self.cursor
+        finish = self.at_end
+        record = RebuildRecord(params, frames, requested)
+        self.rebuilds.append(record)
+        if self.state is PlaybackState.ERROR and self.reader is None:
+            # Nothing to rebuild from (the bag never opened): keep the parameters for later.
+            with self.lock:
+                self.session.params = params
+            return
+        for mode in self._order():
+            started = time.perf_counter()
+            cmap = self._build_map(mode, params, frames, finish, generation)
+            record.compute_s[mode] = time.perf_counter() - started
+            with self.lock:
+                self.session.adopt(params, {mode: cmap})
+            self._notify_maps((mode,), True)
+            record.published[mode] = time.perf_counter()
+        record.completed = True
+        with self._cond:
+            self._anchor = None
+        self._notify_status()
