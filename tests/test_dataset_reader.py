@@ -569,3 +569,25 @@ def test_ground_truth_nonfinite_and_backwards_are_skipped(tmp_path: Path) -> Non
     assert c.nonfinite_ground_truth == 1
     assert c.ground_truth_stamps_backwards == 1
     assert frame.ground_truth == pytest.approx((0.3, 0.0, 0.0))
+
+
+def test_reading_streams_with_flat_memory(tmp_path: Path) -> None:
+    import tracemalloc
+
+    def peak_while_reading(n: int) -> tuple[int, int]:
+        frames = [(0.1 + 0.05 * k, jpeg(k % 7)) for k in range(n)]
+        odom = [(0.05 * k, 0.1, 0.0) for k in range(n + 2)]
+        gt = [(0.1 * k, 0.0, 0.0, 0.0) for k in range(n // 2 + 2)]
+        path = write_bag(tmp_path / f"m{n}.bag", frames, odom, gt)
+        with open_bag(path) as reader:
+            tracemalloc.start()
+            count = sum(1 for _ in reader.frames())
+            peak = tracemalloc.get_traced_memory()[1]
+            tracemalloc.stop()
+        return count, peak
+
+    small_n, small_peak = peak_while_reading(100)
+    big_n, big_peak = peak_while_reading(800)
+    assert (small_n, big_n) == (100, 800)
+    # eight times the frames (about 8 MB more JPEG data), not eight times the memory
+    assert big_peak < 1.5 * small_peak + 1_000_000
