@@ -162,6 +162,8 @@ def test_existing_output_and_interrupted_generation(tmp_path: Path, loop_file: P
 
     with pytest.raises(KeyboardInterrupt):
         generate_maze_bag(tmp_path / "y.bag", config, workers=1, progress=stop)
+    with pytest.raises(ParameterError, match="workers 0 must be at least 1"):
+        generate_maze_bag(tmp_path / "z.bag", config, workers=0)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.bag"]  # no bag, no partial file
 
 

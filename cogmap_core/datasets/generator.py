@@ -18,7 +18,7 @@ import os
 import sys
 import time
 import types
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -293,7 +293,7 @@ def render_frames(
     progress: ProgressFn | None = None,
     camera: CameraModel | None = None,
     min_frames_per_worker: int = _MIN_FRAMES_PER_WORKER,
-) -> tuple[int, Iterator[bytes]]:
+) -> tuple[int, Generator[bytes, None, None]]:
     """Start rendering the plan's frames; returns ``(workers used, iterator of JPEG bytes)``.
 
     Uses up to ``workers`` processes (default: all CPUs), at most one per
@@ -314,7 +314,7 @@ def render_frames(
         for s in range(0, n, _CHUNK)
     ]
 
-    def generate() -> Iterator[bytes]:
+    def generate() -> Generator[bytes, None, None]:
         done = 0
         if used == 1:
             renderer = MazeRenderer(plan.layout, camera)
@@ -462,9 +462,9 @@ def generate_maze_bag(
     config = config or MazeConfig()
     out = Path(out)
     plan = plan_dataset(config)
-    writer = IratBagWriter(out, overwrite=overwrite)
-    used, images = render_frames(plan, workers=workers, progress=progress)
     preview_index = preview_frame(plan) if preview else -1
+    used, images = render_frames(plan, workers=workers, progress=progress)  # starts lazily
+    writer = IratBagWriter(out, overwrite=overwrite)
     preview_jpeg: bytes | None = None
     odom_times, gt_times = plan.odom_times, plan.gt_times
     to_ns = 1e9
@@ -493,7 +493,7 @@ def generate_maze_bag(
                 )
                 gi += 1
 
-    with writer:
+    with writer, contextlib.closing(images):
         for j, jpeg in enumerate(images):
             t = float(plan.frame_times[j])
             flush_until(t)
