@@ -2,8 +2,8 @@
 
 The cache directory is ``$COGMAP_CACHE`` if set, else ``$XDG_CACHE_HOME/cogmap``, else
 ``~/.cache/cogmap``. The default dataset is the iRat-like maze (:data:`DEFAULT_CONFIG`: 6 laps,
-seed 1): 825 s (13 min 45 s) of data, 14446 camera frames, 130 m driven, a 157 MB bag, made in
-about 35 s on two cores. Its file name carries :data:`DATASET_VERSION`, bumped whenever the
+seed 1): 825 s (13 min 45 s) of data, 14446 camera frames, 130 m driven, a 168 MB bag, made in
+35-50 s on two cores. Its file name carries :data:`DATASET_VERSION`, bumped whenever the
 generator's output changes, so a stale cached bag is never used. Generation writes to a
 temporary name and renames at the end, under a lock, so concurrent callers wait for one
 generation and never see a half-written bag.
