@@ -189,7 +189,6 @@ class CogmapApp:
     def _build_gui(self, params: MapParams, speed: float, autoplay: bool) -> None:
         gui = self.server.gui
         gui.configure_theme(
-            control_layout="collapsible",
             control_width="large",
             show_share_button=False,
             brand_color=(30, 140, 60),
@@ -411,9 +410,17 @@ class CogmapApp:
         self.request_params()
 
     def current_slider_params(self) -> MapParams:
-        """The parameters the sliders show (others unchanged)."""
-        values = {name: float(s.value) for name, s in self.param_sliders.items()}
-        return self.replay.params.with_changes(**values)
+        """The parameters the sliders show, each clamped into its slider's range.
+
+        A value that is not a finite number keeps the parameter in use. (A client can set a
+        slider's value without its callback running, so every slider is checked here.)
+        """
+        params = self.replay.params
+        values: dict[str, float] = {}
+        for spec in SLIDERS + ADVANCED_SLIDERS:
+            value = clamp_to_slider(spec, self.param_sliders[spec.name].value)
+            values[spec.name] = getattr(params, spec.name) if value is None else value
+        return params.with_changes(**values)
 
     def request_params(self) -> None:
         """Rebuild the maps for the sliders' values (latest wins)."""

@@ -46,6 +46,23 @@ REBUILD_CHUNK = 1000
 MAX_LAG_S = 1.0
 _TIME_TOLERANCE = 1e-6
 
+_CLUSTERING_AND_OPTIMISATION = frozenset({"t_interval", "t_total", "huber_scale"})
+_INTEGRATION = frozenset({"integration_radius", "integration_max_residual"})
+#: The map parameters each map depends on. A change of other parameters leaves a map exactly as
+#: it is, so its rebuild is skipped (the neighborhood field and short-edge removal belong to the
+#: compact map only, scene integration to the two non-standard maps). The tests rebuild every map
+#: for a change of every parameter and check this table.
+PARAMS_USED: dict[MapMode, frozenset[str]] = {
+    MapMode.STANDARD: _CLUSTERING_AND_OPTIMISATION,
+    MapMode.SCENE_INTEGRATION: _CLUSTERING_AND_OPTIMISATION | _INTEGRATION,
+    MapMode.COMPACT: frozenset(MapParams().to_dict()),
+}
+
+
+def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:
+    """Whether map ``mode`` built with ``old`` can differ from one built with ``new``."""
+    return any(getattr(old, name) != getattr(new, name) for name in PARAMS_USED[mode])
+
 
 class PlaybackState(StrEnum):
     """What the worker is doing."""
@@ -622,7 +639,13 @@ class Replay:
             return
         for mode in self._order():
             started = time.perf_counter()
-            cmap = self._build_map(mode, params, frames, finish, generation)
+            current = self.session.maps[mode]
+            if needs_rebuild(mode, current.params, params):
+                cmap = self._build_map(mode, params, frames, finish, generation)
+            else:
+                cmap = current  # the changed parameters do not affect this map
+                with self.lock:
+                    cmap.set_params(params)
             record.compute_s[mode] = time.perf_counter() - started
             with self.lock:
                 self.session.adopt(params, {mode: cmap})

@@ -123,6 +123,15 @@ class ChunkedNodes:
         """Chunks currently shown."""
         return len(self._handles)
 
+    @property
+    def num_items(self) -> int:
+        """Items currently shown."""
+        return sum(part.shape[0] for part, _ in self._sent)
+
+    def items(self) -> np.ndarray | None:
+        """All items currently shown, concatenated (None when empty)."""
+        return np.concatenate([part for part, _ in self._sent]) if self._sent else None
+
     def sync(self, items: np.ndarray, colors: np.ndarray | None = None) -> int:
         """Show ``items`` (with per-item ``colors`` or none); return the chunks sent."""
         n = items.shape[0]

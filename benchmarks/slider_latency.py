@@ -1,0 +1,134 @@
+"""Slider release -> updated map latency of the web app, on the default dataset at its end.
+
+Drives the server the way a browser does (the slider handles' values are set, which runs the
+same callbacks as a client's update): replays the whole bag at maximum speed, then for each map
+shown (compact, scene_integration, standard) moves the delta slider to a few values and reports
+the time from the slider change to the displayed map being published to the scene (and to all
+three maps being rebuilt), against the 200 ms target. Finally a slider storm (many changes per
+second) checks that work never queues: how many rebuilds started, how many were abandoned, and
+how long after the last change the final map was shown.
+
+    python benchmarks/slider_latency.py [BAG] [--storm N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import viser  # noqa: E402
+
+from app.server.app import CogmapApp  # noqa: E402
+from cogmap_core.cognitive_map import MapMode  # noqa: E402
+
+TARGET_S = 0.200
+DELTAS = (5.0, 3.746, 8.0, 4.5)
+
+
+def wait_rebuilt(app: CogmapApp, count: int, timeout: float = 600.0) -> None:
+    """Wait until ``count`` rebuild records exist and the worker is idle."""
+    deadline = time.monotonic() + timeout
+    while len(app.replay.rebuilds) < count and time.monotonic() < deadline:
+        time.sleep(0.002)
+    if not app.replay.wait_idle(timeout):
+        raise SystemExit("the server did not become idle")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("bag", nargs="?", default=None, help="bag (default: built-in dataset)")
+    parser.add_argument("--storm", type=int, default=60, help="slider events in the storm")
+    args = parser.parse_args()
+    if args.bag is None:
+        from cogmap_core.datasets.cache import default_dataset_path
+
+        bag = default_dataset_path()
+    else:
+        bag = Path(args.bag)
+    with contextlib.redirect_stdout(io.StringIO()):
+        server = viser.ViserServer(host="127.0.0.1", port=8090, verbose=False)
+    app = CogmapApp(server, bag, speed=math.inf)
+    started = time.perf_counter()
+    app.start()
+    if not app.replay.wait_idle(3600):
+        raise SystemExit("replay did not finish")
+    replay = app.replay
+    print(f"bag: {bag}")
+    print(
+        f"replayed {replay.cursor} frames ({replay.duration:.0f} s of data) in "
+        f"{time.perf_counter() - started:.1f} s; state {replay.state.value} {replay.message}"
+    )
+    sizes = {m.value: replay.session.maps[m].num_vertices for m in MapMode}
+    events = len(replay.session.log.events)
+    print(f"maps at the end (vertices): {sizes}; cached events: {events}")
+    print()
+    slider = app.param_sliders["delta"]
+    header = (
+        f"{'shown map':18} {'delta':>6} {'shown ms':>9} {'x target':>8} {'all 3 ms':>9} "
+        f"{'compute ms (std / si / compact)':>32}"
+    )
+    print(header)
+    results: dict[MapMode, list[float]] = {}
+    for mode in (MapMode.COMPACT, MapMode.SCENE_INTEGRATION, MapMode.STANDARD):
+        app.mode_dropdown.value = mode.value
+        for delta in DELTAS:
+            n = len(replay.rebuilds)
+            slider.value = delta
+            wait_rebuilt(app, n + 1)
+            record = replay.rebuilds[-1]
+            shown = record.latency(mode)
+            assert shown is not None and record.completed
+            total = max(record.published.values()) - record.requested
+            compute = " / ".join(
+                f"{record.compute_s[m] * 1000:.0f}"
+                for m in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+            )
+            results.setdefault(mode, []).append(shown)
+            print(
+                f"{mode.value:18} {delta:6.3f} {shown * 1000:9.1f} {shown / TARGET_S:8.2f} "
+                f"{total * 1000:9.1f} {compute:>32}"
+            )
+    print()
+    for mode, values in results.items():
+        med = statistics.median(values)
+        print(
+            f"median slider->shown latency, {mode.value:18}: {med * 1000:7.1f} ms "
+            f"({med / TARGET_S:.2f} x the {TARGET_S * 1000:.0f} ms target)"
+        )
+
+    # storm: many changes per second, latest wins
+    app.mode_dropdown.value = MapMode.COMPACT.value
+    n_before = len(replay.rebuilds)
+    values = [3.0 + 0.05 * k for k in range(args.storm)]
+    t0 = time.perf_counter()
+    for v in values:
+        slider.value = v
+        time.sleep(1.0 / 30.0)  # 30 events per second, like a dragged slider
+    last_change = time.perf_counter()
+    replay.wait_idle(600)
+    records = replay.rebuilds[n_before:]
+    final = records[-1]
+    assert final.completed and math.isclose(final.params.delta, values[-1])
+    shown_after = final.published[MapMode.COMPACT] - last_change
+    print()
+    print(
+        f"storm: {len(values)} slider events in {last_change - t0:.2f} s -> "
+        f"{len(records)} rebuilds started, {sum(not r.completed for r in records)} abandoned, "
+        f"final delta {final.params.delta:.3f} == last value; final compact map shown "
+        f"{shown_after * 1000:.0f} ms after the last event"
+    )
+    app.stop()
+    server.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

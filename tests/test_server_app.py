@@ -1,0 +1,474 @@
+"""The web app driven from Python: replay, every slider, clamping, storms, seek, exports, errors.
+
+Expected maps are computed independently with :class:`SlamSession` / ``SlamSession.rebuild`` on
+the same bag, and compared exactly.
+"""
+
+from __future__ import annotations
+
+import bisect
+import csv
+import html
+import io
+import json
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
+import viser
+from websockets.sync.client import ClientConnection, connect
+
+from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
+from app.server.export import g2o_bytes, save_html_replay, summary_dict
+from app.server.replay import PARAMS_USED, PlaybackState
+from cogmap_core.cognitive_map import MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.g2o import read_g2o
+from cogmap_core.slam import SlamSession
+from tests import test_server_support as support
+from tests.test_server_support import assert_same_map, counter, running_app
+
+short_bag = support.short_bag  # session fixtures shared by the web-app tests
+reference = support.reference
+
+# A value for every slider that changes at least one map on the short bag.
+CHANGES: tuple[tuple[str, float], ...] = (
+    ("alpha", 40.0),
+    ("beta", 0.0),
+    ("delta", 8.0),
+    ("t_interval", 0.1),
+    ("t_total", 1.0),
+    ("huber_scale", 2.0),
+    ("short_edge_threshold", 0.3),
+)
+
+
+def differs(a: object, b: object) -> bool:
+    from cogmap_core.cognitive_map import CognitiveMap
+
+    assert isinstance(a, CognitiveMap) and isinstance(b, CognitiveMap)
+    if (a.num_vertices, a.num_edges, len(a.clusters)) != (
+        b.num_vertices,
+        b.num_edges,
+        len(b.clusters),
+    ):
+        return True
+    return not np.allclose(a.snapshot().poses, b.snapshot().poses, rtol=0, atol=1e-9)
+
+
+def wait(app: CogmapApp) -> None:
+    assert app.replay.wait_idle(60), "the replay did not settle"
+
+
+def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSession) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        r = app.replay
+        assert r.state is PlaybackState.ENDED and r.message == ""
+        assert r.cursor == reference.log.frames == r.total_frames
+        for mode in MapMode:
+            assert_same_map(r.session.maps[mode], reference.maps[mode])
+        compact = reference.maps[MapMode.COMPACT]
+        assert counter(app, "frames") == f"{reference.log.frames} / {reference.log.frames}"
+        assert counter(app, "vertices") == str(compact.num_vertices)
+        assert counter(app, "compact-edges") == str(compact.num_edges)
+        assert counter(app, "compact-clusters") == str(len(compact.clusters))
+        assert counter(app, "compact-optimizations") == str(len(compact.optimizations))
+        assert counter(app, "compact-ate") == f"{reference.ate(compact):.3f}"
+        links = sum(1 for e in reference.log.events if type(e).__name__ == "LinkToVertex")
+        assert counter(app, "loops-detected") == str(links)
+        # the scene shows exactly the compact map's vertices and the whole ground truth
+        layer = app.streamer.layers[MapMode.COMPACT]
+        assert layer.vertices.num_items == compact.num_vertices
+        shown = layer.vertices.items()
+        assert shown is not None
+        np.testing.assert_allclose(shown[:, :2], compact.snapshot().poses[:, :2], atol=1e-6)
+        assert layer.sequential.num_items + layer.loops.num_items == compact.num_edges
+        assert app.streamer.ground_truth.path.num_items == reference.log.frames - 1
+        # the size chart ends at the maps' final sizes (standard V, E, ..., compact V, E)
+        last = [float(series[-1]) for series in app.chart.data[1:]]
+        expected = []
+        for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
+            expected += [reference.maps[mode].num_vertices, reference.maps[mode].num_edges]
+        assert last == expected
+
+
+def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: SlamSession) -> None:
+    paper = MapParams()
+    with running_app(short_bag) as app:
+        wait(app)
+        for name, value in CHANGES:
+            before = dict(app.replay.session.maps.maps)
+            app.param_sliders[name].value = value
+            wait(app)
+            params = paper.with_changes(**{name: value})
+            assert app.replay.params == params
+            expected = reference.rebuild(params)
+            for mode in MapMode:
+                assert_same_map(app.replay.session.maps[mode], expected[mode])
+                if name not in PARAMS_USED[mode]:  # not rebuilt at all
+                    assert app.replay.session.maps[mode] is before[mode]
+            assert any(differs(before[m], expected[m]) for m in MapMode), name
+            compact = expected[MapMode.COMPACT]
+            assert counter(app, "vertices") == str(compact.num_vertices)
+            assert counter(app, "compact-clusters") == str(len(compact.clusters))
+            assert app.streamer.layers[MapMode.COMPACT].vertices.num_items == compact.num_vertices
+            record = app.replay.rebuilds[-1]
+            assert record.completed and record.frames == reference.log.frames
+            app.reset_params()
+            wait(app)
+            assert app.replay.params == paper
+            for mode in MapMode:
+                assert_same_map(app.replay.session.maps[mode], reference.maps[mode])
+            assert counter(app, "vertices") == str(reference.maps[MapMode.COMPACT].num_vertices)
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    CHANGES + (("integration_radius", 0.05), ("integration_max_residual", 0.01)),
+)
+def test_maps_ignore_the_parameters_they_do_not_use(
+    reference: SlamSession, name: str, value: float
+) -> None:
+    assert PARAMS_USED[MapMode.COMPACT] == set(MapParams().to_dict())
+    rebuilt = reference.rebuild(MapParams().with_changes(**{name: value}))
+    for mode in MapMode:
+        if name not in PARAMS_USED[mode]:
+            assert_same_map(rebuilt[mode], reference.maps[mode])
+
+
+def test_out_of_range_values_are_clamped_and_non_numbers_refused(short_bag: Path) -> None:
+    with running_app(short_bag, autoplay=False) as app:
+        wait(app)
+        for spec in SLIDERS + ADVANCED_SLIDERS:
+            slider = app.param_sliders[spec.name]
+            slider.value = spec.high * 10 + 1
+            assert slider.value == spec.high
+            assert getattr(app.current_slider_params(), spec.name) == spec.high
+            slider.value = spec.low - 100
+            assert slider.value == spec.low
+            slider.value = float("nan")
+            assert slider.value == spec.low  # refused: back to the value in use
+            assert "refused" in app.params_md.content
+        wait(app)
+        expected = {s.name: s.low for s in SLIDERS + ADVANCED_SLIDERS}
+        assert app.replay.params == MapParams().with_changes(**expected)
+
+
+def _client(port: int) -> ClientConnection:
+    return connect(
+        f"ws://127.0.0.1:{port}",
+        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
+        max_size=None,
+        open_timeout=10,
+    )
+
+
+def _say_hello(ws: ClientConnection) -> None:
+    """What a browser sends first (its camera); viser then treats it as a client."""
+    ws.send(
+        msgspec.msgpack.encode(
+            {
+                "type": "ViewerCameraMessage",
+                "wxyz": (1.0, 0.0, 0.0, 0.0),
+                "position": (0.0, 0.0, 5.0),
+                "fov": 1.0,
+                "near": 0.01,
+                "far": 100.0,
+                "image_height": 600,
+                "image_width": 800,
+                "look_at": (0.0, 0.0, 0.0),
+                "up_direction": (0.0, 0.0, 1.0),
+            }
+        )
+    )
+
+
+def test_a_client_sending_out_of_range_values_over_the_websocket(short_bag: Path) -> None:
+    with running_app(short_bag, autoplay=False) as app:
+        wait(app)
+        delta = app.param_sliders["delta"]
+        with _client(app.server.get_port()) as ws:
+            _say_hello(ws)
+            deadline = time.monotonic() + 10
+            while not app.server.get_clients() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            for sent, expected in ((1e9, 30.0), (-3.0, 1.05), (6.5, 6.5)):
+                message = {
+                    "type": "GuiUpdateMessage",
+                    "uuid": delta._impl.uuid,
+                    "updates": {"value": sent},
+                }
+                ws.send(msgspec.msgpack.encode(message))
+                deadline = time.monotonic() + 10
+                while app.replay.params.delta != expected and time.monotonic() < deadline:
+                    time.sleep(0.01)
+                assert delta.value == expected
+                assert app.replay.params.delta == expected
+        # A value slipped in without the callback (viser applies values of clients that never
+        # sent their camera) is clamped when the parameters are read.
+        app.param_sliders["alpha"]._impl.value = 1e7
+        assert app.current_slider_params().alpha == 50.0
+
+
+def test_a_slider_storm_never_queues_work(short_bag: Path, reference: SlamSession) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        start = len(app.replay.rebuilds)
+        values = [3.0 + 0.1 * k for k in range(40)]
+        threads = []
+        for v in values:  # as fast as callbacks can come, from several threads
+            app.param_sliders["delta"].value = v
+        for _ in range(4):
+            t = threading.Thread(target=lambda: app.param_sliders["alpha"].value == 10.0)
+            t.start()
+            threads.append(t)
+        for t in threads:
+            t.join()
+        wait(app)
+        records = app.replay.rebuilds[start:]
+        assert app.replay.params.delta == values[-1]
+        assert records[-1].completed and records[-1].params.delta == values[-1]
+        assert len(records) <= len(values)
+        assert all(not r.completed for r in records[:-1] if r.params.delta != values[-1])
+        expected = reference.rebuild(MapParams(delta=values[-1]))
+        for mode in MapMode:
+            assert_same_map(app.replay.session.maps[mode], expected[mode])
+
+
+def test_maps_depend_on_data_time_only(short_bag: Path, reference: SlamSession) -> None:
+    """Step part way, change parameters there, play on: the same maps as a fresh rebuild."""
+    params = MapParams(delta=6.0, t_interval=1.0)
+    with running_app(short_bag, autoplay=False) as app:
+        wait(app)
+        for _ in range(150):
+            app.step_button.value = True
+        wait(app)
+        assert app.replay.cursor == 150
+        assert counter(app, "frames") == f"150 / {app.replay.total_frames}"
+        expected = reference.rebuild(MapParams(), frames=150, finish=False)
+        for mode in MapMode:
+            assert_same_map(app.replay.session.maps[mode], expected[mode])
+        app.param_sliders["delta"].value = 6.0
+        app.param_sliders["t_interval"].value = 1.0
+        wait(app)
+        app.speed_dropdown.value = "20x"  # paced playback ...
+        app.replay.step(30)
+        wait(app)
+        app.speed_dropdown.value = "max"  # ... then as fast as possible
+        app.play_button.value = True
+        wait(app)
+        assert app.replay.state is PlaybackState.ENDED
+        final = reference.rebuild(params)
+        for mode in MapMode:
+            assert_same_map(app.replay.session.maps[mode], final[mode])
+
+
+def test_seek_and_restart_replay_from_the_cache(short_bag: Path, reference: SlamSession) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        frontend_frames = app.replay.session.frontend.frames
+        app.play_button.value = True  # pause: a seek while playing plays on from there
+        assert not app.replay.playing and app.play_button.label == "play"
+        for t in (20.0, 50.0, 5.0):
+            app.seek_slider.value = t
+            wait(app)
+            k = bisect.bisect_right(reference.log.frame_time, t)
+            assert app.replay.cursor == k
+            expected = reference.rebuild(MapParams(), frames=k, finish=False)
+            for mode in MapMode:
+                assert_same_map(app.replay.session.maps[mode], expected[mode])
+            assert counter(app, "frames") == f"{k} / {app.replay.total_frames}"
+            assert app.streamer.ground_truth.path.num_items == k - 1
+        app.seek_slider.value = 1e9  # clamped to the end
+        wait(app)
+        assert app.seek_slider.value == app.seek_slider.max
+        assert app.replay.state is PlaybackState.ENDED
+        app.restart_button.value = True  # a click
+        wait(app)
+        assert app.replay.cursor == 0 and app.replay.state is PlaybackState.PAUSED
+        assert app.streamer.layers[MapMode.COMPACT].vertices.num_items == 0
+        app.play_button.value = True
+        wait(app)
+        assert app.replay.state is PlaybackState.ENDED
+        for mode in MapMode:
+            assert_same_map(app.replay.session.maps[mode], reference.maps[mode])
+        # the front end never saw a frame twice: everything after the first pass was cached
+        assert app.replay.session.frontend.frames == frontend_frames
+
+
+def test_seek_forward_runs_the_front_end_up_to_the_target(
+    short_bag: Path, reference: SlamSession
+) -> None:
+    with running_app(short_bag, autoplay=False) as app:
+        wait(app)
+        app.replay.seek(30.0)
+        wait(app)
+        k = bisect.bisect_right(reference.log.frame_time, 30.0)
+        assert app.replay.cursor in (k, k + 1)  # stops at the first frame at or past 30 s
+        assert app.replay.frame_time >= 30.0
+        expected = reference.rebuild(MapParams(), frames=app.replay.cursor, finish=False)
+        for mode in MapMode:
+            assert_same_map(app.replay.session.maps[mode], expected[mode])
+        assert app.replay.state is PlaybackState.PAUSED
+
+
+def test_exports(short_bag: Path, reference: SlamSession, tmp_path: Path) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        compact = reference.maps[MapMode.COMPACT]
+        path = tmp_path / "compact.g2o"
+        with app.replay.lock:
+            path.write_bytes(g2o_bytes(app.replay.session.maps[MapMode.COMPACT]))
+            summary = summary_dict(app.replay)
+        graph = read_g2o(path)
+        assert graph.num_vertices == compact.num_vertices
+        assert graph.num_edges == compact.num_edges
+        assert summary["frames"] == reference.log.frames
+        maps = summary["maps"]
+        assert isinstance(maps, dict)
+        for mode in MapMode:
+            assert maps[mode.value]["vertices"] == reference.maps[mode].num_vertices
+            assert maps[mode.value]["clusters"] == len(reference.maps[mode].clusters)
+        # the download buttons send the same files to the client that clicked
+        sent: list[tuple[str, bytes]] = []
+
+        class FakeClient:
+            def send_file_download(self, name: str, content: bytes, **_: object) -> None:
+                sent.append((name, content))
+
+        for what in ("g2o", "summary", "sizes"):
+            app._download(FakeClient(), what)  # type: ignore[arg-type]
+        assert [name for name, _ in sent] == ["compact.g2o", "summary.json", "sizes.csv"]
+        assert sent[0][1] == path.read_bytes()
+        assert json.loads(sent[1][1])["maps"] == maps
+        rows = list(csv.reader(io.StringIO(sent[2][1].decode())))
+        assert rows[0][0] == "time" and rows[0][-1] == "compact_edges"
+        last = [int(v) for v in rows[-1][1:]]
+        expected = []
+        for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
+            expected += [reference.maps[mode].num_vertices, reference.maps[mode].num_edges]
+        assert last == expected
+        # a self-contained HTML replay of the session
+        out = save_html_replay(app.replay, (MapMode.COMPACT,), tmp_path / "replay.html", 20, 2.0)
+        page = out.read_text()
+        assert "__VISER_EMBED_DATA__" in page and page.rstrip().endswith("</html>")
+        with pytest.raises(Exception, match=r"\.html"):
+            save_html_replay(app.replay, (MapMode.COMPACT,), tmp_path / "replay.txt")
+        (tmp_path / "notes.html").write_text("<html>mine</html>")
+        with pytest.raises(Exception, match="not a cogmap replay"):
+            save_html_replay(app.replay, (MapMode.COMPACT,), tmp_path / "notes.html")
+
+
+def _http_ok(app: CogmapApp) -> bool:
+    with urllib.request.urlopen(f"http://127.0.0.1:{app.server.get_port()}/", timeout=10) as r:
+        return r.status == 200 and b"<html" in r.read().lower()
+
+
+def test_a_missing_bag_shows_an_error_and_the_server_keeps_serving(tmp_path: Path) -> None:
+    with running_app(tmp_path / "nope.bag") as app:
+        wait(app)
+        assert app.replay.state is PlaybackState.ERROR
+        assert "nope.bag does not exist" in app.status_html.content
+        assert 'data-state="error"' in app.status_html.content
+        assert _http_ok(app)
+        app.param_sliders["delta"].value = 5.0  # the page stays usable
+        app.replay.restart()
+        wait(app)
+        assert app.replay.state is PlaybackState.ERROR
+        assert _http_ok(app)
+
+
+def test_a_bag_corrupt_mid_replay_keeps_what_was_mapped(
+    short_bag: Path, reference: SlamSession, tmp_path: Path
+) -> None:
+    data = bytearray(short_bag.read_bytes())
+    records = [i for i in range(len(data) - 4) if data[i : i + 4] == b"op=\x02"]
+    middle = records[len(records) // 2]
+    data[middle + 3] = 0x09  # a message record in the middle of the bag: unknown record type
+    broken = tmp_path / "broken.bag"
+    broken.write_bytes(bytes(data))
+    with running_app(broken) as app:
+        wait(app)
+        r = app.replay
+        assert r.state is PlaybackState.ERROR
+        assert r.message.startswith(f"bag {broken} is corrupt near t=")
+        assert html.escape(r.message) in app.status_html.content
+        assert 0 < r.cursor < reference.log.frames
+        assert counter(app, "frames") == f"{r.cursor} / {r.total_frames}"
+        expected = reference.rebuild(MapParams(), frames=r.cursor, finish=False)
+        for mode in MapMode:
+            assert_same_map(r.session.maps[mode], expected[mode])
+        assert _http_ok(app)
+        cursor = r.cursor
+        app.param_sliders["delta"].value = 6.0  # tuning still works on what was mapped
+        wait(app)
+        expected = reference.rebuild(MapParams(delta=6.0), frames=cursor, finish=False)
+        assert_same_map(r.session.maps[MapMode.COMPACT], expected[MapMode.COMPACT])
+        assert counter(app, "vertices") == str(expected[MapMode.COMPACT].num_vertices)
+
+
+def test_twenty_clients_at_once_and_abrupt_disconnects_do_not_disturb_playback(
+    short_bag: Path, reference: SlamSession
+) -> None:
+    with running_app(short_bag, speed=30.0) as app:
+        port = app.server.get_port()
+        clients = [_client(port) for _ in range(20)]
+        for ws in clients:
+            _say_hello(ws)
+        received = [0] * len(clients)
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            for i, ws in enumerate(clients):
+                try:
+                    received[i] += len(ws.recv(timeout=0.01))
+                except TimeoutError:
+                    pass
+        for ws in clients[::2]:  # half vanish mid-stream without a closing handshake
+            ws.socket.close()
+        for ws in clients[1::2]:
+            ws.close()
+        wait(app)
+        assert min(received) > 0
+        assert app.replay.state is PlaybackState.ENDED
+        for mode in MapMode:
+            assert_same_map(app.replay.session.maps[mode], reference.maps[mode])
+        assert _http_ok(app)
+
+
+def test_a_late_client_receives_the_full_current_map(
+    short_bag: Path, reference: SlamSession
+) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        app.param_sliders["short_edge_threshold"].value = 0.3  # history: chunks sent, removed
+        wait(app)
+        app.reset_params()
+        wait(app)
+        # viser sends a joining client its message buffer: the latest state of every node
+        buffer = app.server._websock_server._broadcast_buffer
+        with buffer.buffer_lock:
+            messages = list(buffer.message_from_id.values())
+        for mode in MapMode:
+            clouds = [
+                m
+                for m in messages
+                if type(m).__name__ == "PointCloudMessage"
+                and m.name.startswith(f"/map/{mode.value}/vertices/")
+            ]
+            assert len({m.name for m in clouds}) == len(clouds)
+            total = sum(m.props.points.shape[0] for m in clouds)
+            shown = mode is MapMode.COMPACT  # hidden maps are sent when first shown
+            assert total == (reference.maps[mode].num_vertices if shown else 0)
+        with _client(app.server.get_port()) as ws:
+            size = 0
+            try:
+                while True:
+                    size += len(ws.recv(timeout=1.0))
+            except TimeoutError:
+                pass
+        assert size > reference.maps[MapMode.COMPACT].num_vertices * 3 * 4

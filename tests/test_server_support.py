@@ -1,0 +1,83 @@
+"""Shared fixtures of the web-app tests: a short generated bag, its reference session, a server.
+
+The reference is a :class:`SlamSession` run over the same bag without the web app; the app's maps
+must equal it (and its ``rebuild`` results) exactly.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import re
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import viser
+
+from app.server.app import CogmapApp
+from cogmap_core.cognitive_map import CognitiveMap
+from cogmap_core.datasets import MazeConfig, generate_maze_bag, open_bag
+from cogmap_core.slam import SlamSession
+
+# One lap of the figure-eight maze at 6 frames/s: about 400 frames, 67 s of data.
+SHORT_BAG = MazeConfig(layout="figure_eight", laps=1, fps=6.0)
+
+
+@pytest.fixture(scope="session")
+def short_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("server-bag") / "figure_eight_1lap.bag"
+    generate_maze_bag(path, SHORT_BAG, workers=1)
+    return path
+
+
+@pytest.fixture(scope="session")
+def reference(short_bag: Path) -> SlamSession:
+    session = SlamSession()
+    with open_bag(short_bag, image_scale=4) as reader:
+        session.run(reader.frames())
+    return session
+
+
+def make_server() -> viser.ViserServer:
+    with contextlib.redirect_stdout(io.StringIO()):
+        return viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+
+
+@contextlib.contextmanager
+def running_app(bag: Path, **kwargs: object) -> Iterator[CogmapApp]:
+    """A started app on a private server (port chosen by the OS), stopped afterwards."""
+    server = make_server()
+    kwargs.setdefault("speed", math.inf)
+    app = CogmapApp(server, bag, **kwargs)  # type: ignore[arg-type]
+    try:
+        app.start()
+        yield app
+    finally:
+        app.stop()
+        server.stop()
+
+
+def assert_same_map(actual: CognitiveMap, expected: CognitiveMap) -> None:
+    """Exactly the same graph: ids, edges, counts, optimisations; poses to 1e-9."""
+    assert actual.mode == expected.mode
+    assert actual.num_vertices == expected.num_vertices
+    assert actual.num_edges == expected.num_edges
+    assert actual.num_loop_edges == expected.num_loop_edges
+    assert len(actual.clusters) == len(expected.clusters)
+    assert len(actual.optimizations) == len(expected.optimizations)
+    a, e = actual.snapshot(), expected.snapshot()
+    np.testing.assert_array_equal(a.vertex_ids, e.vertex_ids)
+    np.testing.assert_array_equal(a.edge_from, e.edge_from)
+    np.testing.assert_array_equal(a.edge_to, e.edge_to)
+    np.testing.assert_array_equal(a.edge_cluster, e.edge_cluster)
+    np.testing.assert_allclose(a.poses, e.poses, rtol=0, atol=1e-9)
+
+
+def counter(app: CogmapApp, key: str) -> str:
+    """The text of counter ``cogmap-<key>`` on the page."""
+    match = re.search(rf'id="cogmap-{re.escape(key)}"[^>]*>([^<]*)<', app.counters_html.content)
+    assert match is not None, f"no counter {key} in {app.counters_html.content}"
+    return match.group(1)
