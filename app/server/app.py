@@ -162,6 +162,7 @@ class CogmapApp:
         self._links_counted = (0, 0)  # (events counted, LinkToVertex among them)
         self._suppress_param_events = False
         self._camera_extent: tuple[float, float, float, float] | None = None
+        self._pending_frame: tuple[Frame, int | None] | None = None
         self.exports: list[Path] = []
         self.replay = Replay(
             bag,
@@ -452,13 +453,18 @@ class CogmapApp:
             self._update_status()
 
     def on_frame(self, replay: Replay, frame: Frame, view_template: int | None) -> None:
-        """Show the camera image (rate-limited)."""
-        forced = not replay.playing
-        if not self._image_limit.due(forced):
+        """Show the camera image (rate-limited; the latest one is shown when playback stops)."""
+        self._pending_frame = (frame, view_template)
+        if self._image_limit.due(not replay.playing):
+            self._show_frame()
+
+    def _show_frame(self) -> None:
+        pending = self._pending_frame
+        if pending is None:
             return
-        gray = frame.image
-        rgb = np.repeat(gray[:, :, None], 3, axis=2)
-        self.camera_image.image = rgb
+        self._pending_frame = None
+        frame, view_template = pending
+        self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
             f"view template **{template}** · frame {frame.index} · t = {frame.time:.2f} s"
@@ -468,6 +474,8 @@ class CogmapApp:
         """Stream the maps (rate-limited during playback)."""
         if not self._scene_limit.due(forced):
             return
+        if forced:
+            self._show_frame()
         with self._scene_lock:
             self._publish_scene()
             self._update_counters(forced)
@@ -490,17 +498,17 @@ class CogmapApp:
         if r is None:
             return '<div id="cogmap-status">starting…</div>'
         state = r.state
-        icon = {
-            PlaybackState.LOADING: "⏳",
-            PlaybackState.PLAYING: "▶",
-            PlaybackState.PAUSED: "⏸",
-            PlaybackState.ENDED: "⏹",
-            PlaybackState.ERROR: "⚠",
+        color = {
+            PlaybackState.LOADING: "#8a6d00",
+            PlaybackState.PLAYING: "#1e8c3c",
+            PlaybackState.PAUSED: "#555555",
+            PlaybackState.ENDED: "#34659f",
+            PlaybackState.ERROR: "#b00020",
         }[state]
         speed = "max" if math.isinf(r.speed) else f"{r.speed:g}×"
         t = 0.0 if math.isnan(r.frame_time) else r.frame_time
         bag = html.escape(r.bag_path.name) if r.bag_path else "–"
-        parts = [f"<b>{icon} {state.value}</b>"]
+        parts = [f'<b style="color:{color}">{state.value}</b>']
         if state is not PlaybackState.ERROR:
             parts.append(f"{speed} · t = {t:.1f} / {r.duration:.1f} s · {bag}")
         text = " · ".join(parts)

@@ -1,0 +1,154 @@
+"""Incremental scene streaming: only changed chunks are sent, exact counts."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import viser
+
+from app.server.scene import CHUNK, ChunkedNodes, MapLayer, SceneStreamer, StreamStats
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry
+from tests.test_server_support import make_server
+
+
+class FakeNode:
+    def __init__(self, log: list[str], name: str) -> None:
+        self.log, self.name = log, name
+
+    def remove(self) -> None:
+        self.log.append(f"remove {self.name}")
+
+
+def test_chunked_nodes_send_only_changed_chunks() -> None:
+    log: list[str] = []
+
+    def factory(name: str, part: np.ndarray, colors: np.ndarray | None) -> FakeNode:
+        log.append(f"send {name} {part.shape[0]}")
+        return FakeNode(log, name)
+
+    stats = StreamStats()
+    nodes = ChunkedNodes("/x", factory, stats, chunk=4)  # type: ignore[arg-type]
+    items = np.arange(30, dtype=np.float32).reshape(10, 3)
+    assert nodes.sync(items) == 3
+    assert log == ["send /x/c0000 4", "send /x/c0001 4", "send /x/c0002 2"]
+    log.clear()
+    assert nodes.sync(items) == 0 and log == []
+    grown = np.concatenate([items, np.ones((1, 3), dtype=np.float32)])
+    assert nodes.sync(grown) == 1 and log == ["send /x/c0002 3"]
+    log.clear()
+    grown = np.concatenate([grown, 2 * np.ones((3, 3), dtype=np.float32)])
+    assert nodes.sync(grown) == 2 and log == ["send /x/c0002 4", "send /x/c0003 2"]
+    log.clear()
+    moved = grown.copy()
+    moved[5, 0] += 1.0
+    assert nodes.sync(moved) == 1 and log == ["send /x/c0001 4"]
+    log.clear()
+    assert nodes.sync(moved[:5]) == 1
+    assert log == ["send /x/c0001 1", "remove /x/c0002", "remove /x/c0003"]
+    assert nodes.num_chunks == 2 and nodes.num_items == 5
+    assert stats.chunks_sent == 3 + 1 + 2 + 1 + 1 and stats.chunks_removed == 2
+    log.clear()
+    nodes.clear()
+    assert log == ["remove /x/c0000", "remove /x/c0001"] and nodes.num_items == 0
+
+
+def circle_events(vertices: int, laps: int = 2, start: int = 0) -> list[MapEvent]:
+    """A robot driving laps of a 14 m circle, a vertex every step (0.05 s apart); from the second
+    lap on every 10th vertex closes a loop on the first lap's vertex at that place."""
+    per_lap = vertices // laps
+    events: list[MapEvent] = []
+    for k in range(start, vertices):
+        t = 0.05 * (k + 1)
+        events.append(Odometry(t, 14.0 / per_lap, 2 * math.pi / per_lap))
+        events.append(CreateVertex(t, k, k % per_lap))
+        if k >= per_lap and k % 10 == 0:
+            events.append(LinkToVertex(t, k % per_lap, 0.0))
+    return events
+
+
+@pytest.fixture
+def server() -> viser.ViserServer:
+    s = make_server()
+    yield s
+    s.stop()
+
+
+def test_map_layer_streams_appends_incrementally_and_optimisations_fully(
+    server: viser.ViserServer,
+) -> None:
+    stats = StreamStats()
+    layer = MapLayer(server, MapMode.STANDARD, stats)
+    cmap = CognitiveMap(MapMode.STANDARD, MapParams())
+    cmap.apply_all(circle_events(1200, laps=1))
+    assert cmap.num_vertices == 1200 and not cmap.optimizations
+    assert layer.update(cmap)
+    assert stats.chunks_sent == 3 + 3  # vertices (1200) and sequential edges (1199)
+    assert layer.vertices.num_items == 1200 and layer.sequential.num_items == 1199
+    # a frame later: one more vertex and edge -> only the last chunk of each is sent again
+    before = stats.copy()
+    events = circle_events(2400, laps=2)
+    cmap.apply_all(events[2400 : 2400 + 2])  # vertex 1200: odometry, create
+    assert layer.update(cmap)
+    assert stats.chunks_sent - before.chunks_sent == 2
+    assert stats.items_sent - before.items_sent == (1201 - 2 * CHUNK) + (1200 - 2 * CHUNK)
+    # nothing changed but the robot: no chunk, one robot update
+    before = stats.copy()
+    cmap.apply(Odometry(0.05 * 1201 + 0.01, 0.01, 0.0))
+    assert not layer.update(cmap)
+    assert stats.chunks_sent == before.chunks_sent
+    assert stats.robot_updates == before.robot_updates + 1
+    # the second lap closes loops; the cluster's optimisation moves every vertex
+    cmap.apply_all([e for e in events if e.time > 0.05 * 1201 + 0.02])
+    cmap.finish()
+    assert cmap.optimizations and cmap.num_loop_edges > 0
+    before = stats.copy()
+    layer.update(cmap)
+    vertex_chunks = math.ceil(cmap.num_vertices / CHUNK)
+    assert stats.chunks_sent - before.chunks_sent >= vertex_chunks
+    assert layer.vertices.num_items == cmap.num_vertices
+    assert layer.loops.num_items == cmap.num_loop_edges
+    assert layer.sequential.num_items == cmap.num_edges - cmap.num_loop_edges
+
+
+def test_a_10000_vertex_map_grows_by_one_chunk_per_update(server: viser.ViserServer) -> None:
+    streamer = SceneStreamer(server)
+    streamer.show((MapMode.STANDARD,))
+    cmap = CognitiveMap(MapMode.STANDARD)
+    events = circle_events(10_000, laps=1)
+    cmap.apply_all(events[:-2])
+    streamer.publish({MapMode.STANDARD: cmap})
+    assert streamer.layers[MapMode.STANDARD].vertices.num_items == 9_999
+    before = streamer.stats.copy()
+    cmap.apply_all(events[-2:])
+    streamer.publish({MapMode.STANDARD: cmap})
+    sent = streamer.stats.items_sent - before.items_sent
+    assert streamer.stats.chunks_sent - before.chunks_sent == 2
+    assert sent == (10_000 - 19 * CHUNK) + (9_999 - 19 * CHUNK)
+    assert streamer.layers[MapMode.STANDARD].vertices.num_items == 10_000
+
+
+def test_side_by_side_shows_the_second_map_beside_the_first(server: viser.ViserServer) -> None:
+    streamer = SceneStreamer(server)
+    maps = {m: CognitiveMap(m) for m in MapMode}
+    for cmap in maps.values():
+        cmap.apply_all(circle_events(400, laps=1))
+    streamer.show((MapMode.COMPACT,))
+    streamer.publish(maps)
+    layers = streamer.layers
+    assert layers[MapMode.COMPACT].visible and not layers[MapMode.STANDARD].visible
+    assert layers[MapMode.STANDARD].vertices.num_items == 0  # hidden maps are not streamed
+    streamer.show((MapMode.COMPACT, MapMode.STANDARD))
+    streamer.publish(maps)
+    assert layers[MapMode.STANDARD].visible
+    assert layers[MapMode.STANDARD].vertices.num_items == 400
+    extent = layers[MapMode.COMPACT].extent
+    assert extent is not None
+    assert layers[MapMode.STANDARD].offset >= extent[1] - extent[0] + 0.5
+    assert layers[MapMode.COMPACT].offset == 0.0
+    streamer.show((MapMode.STANDARD,), show_ground_truth=False)
+    assert layers[MapMode.STANDARD].offset == 0.0 and not layers[MapMode.COMPACT].visible
+    assert not streamer.ground_truth.visible
