@@ -1,4 +1,5 @@
-# cogmap web app: `cogmap serve` on port 8080 with the default rat-maze dataset baked in.
+# cogmap web app: `cogmap serve` on port 8080 with the built-in rat-maze dataset baked in.
+#   docker build -t cogmap . && docker run --rm -p 8080:8080 cogmap   # then open localhost:8080
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 \
@@ -17,8 +18,9 @@ COPY app ./app
 COPY static ./static
 RUN pip install .
 
-# Generate the built-in default dataset at build time so the container starts instantly.
-RUN cogmap dataset regenerate
+# Generate the default dataset into $COGMAP_CACHE at build time: the container starts at once.
+RUN cogmap dataset path
 
 EXPOSE 8080
+# `cogmap serve` stops cleanly on SIGTERM (docker stop) as on Ctrl-C.
 CMD ["cogmap", "serve", "--host", "0.0.0.0", "--port", "8080"]
