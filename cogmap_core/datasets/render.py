@@ -204,18 +204,23 @@ class MazeRenderer:
             material = materials[int(rng.integers(len(materials)))]
             start = int(rng.integers(material.shape[1]))
             cols = (start + np.arange(n)) % material.shape[1]
-            strip = material[:, cols].copy()
-            # landmark decals
-            n_decals = rng.poisson(lengths[i] / 0.55) if lengths[i] > 0.2 else 0
+            # each face has its own shade of the shared material
+            strip = material[:, cols] * float(rng.uniform(0.85, 1.15))
+            # landmark decals: at least one on every face that can hold one; faces up to half a
+            # metre (corridor ends, corners) get designs of their own, longer ones may repeat one
+            n_decals = max(1, int(rng.poisson(lengths[i] / 0.45))) if lengths[i] > 0.2 else 0
             for _ in range(n_decals):
-                if designs and rng.random() < 0.2:
+                if designs and lengths[i] > 0.5 and rng.random() < 0.1:
                     decal = designs[int(rng.integers(len(designs)))]  # a look-alike place
                 else:
                     decal = _decal(rng)
                     designs.append(decal)
                 dh, dw = decal.shape
-                if dw >= n - 2:
-                    continue
+                if dw >= n - 2:  # a narrow face shows part of the design
+                    if n < 12:
+                        continue
+                    decal = decal[:, : n - 4]
+                    dw = n - 4
                 c0 = int(rng.integers(1, n - dw - 1))
                 r0 = int(rng.integers(4, max(5, _WALL_TEX_H - dh - 6)))
                 r1 = min(_WALL_TEX_H, r0 + dh)
