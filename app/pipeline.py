@@ -22,7 +22,8 @@ import numpy as np
 from app.plots import map_figure, save_png, size_figure
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagReader, open_bag
+from cogmap_core.datasets import BagReader, BagTopics, open_bag
+from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError
 from cogmap_core.evaluation import align_rigid_2d
 from cogmap_core.frontend import FrontEndConfig
@@ -38,7 +39,8 @@ class RunOptions:
     """Everything that defines a headless run besides the bag."""
 
     params: MapParams = field(default_factory=MapParams)
-    frontend: FrontEndConfig = field(default_factory=FrontEndConfig)
+    frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
+    topics: BagTopics | None = None
     image_scale: int = 4
     force: bool = False
 
@@ -183,12 +185,13 @@ class HeadlessPipeline:
         self.out_dir = Path(out_dir)
         self.options = options or RunOptions()
         self.progress = progress
-        self.session = SlamSession(self.options.params, self.options.frontend)
+        self.frontend = self.options.frontend or frontend_config_for(self.bag)
+        self.session = SlamSession(self.options.params, self.frontend)
         self.files: list[Path] = []
 
     def run(self) -> RunResult:
         """Open the bag, process every frame, finish the maps, evaluate, write the report."""
-        reader = open_bag(self.bag, image_scale=self.options.image_scale)
+        reader = open_bag(self.bag, self.options.topics, image_scale=self.options.image_scale)
         prepare_out_dir(self.out_dir, self.options.force)
         started = wallclock.perf_counter()
         first, last = self._process_frames(reader)
@@ -237,7 +240,8 @@ class HeadlessPipeline:
                 "dataset": str(self.bag),
                 "image_scale": self.options.image_scale,
                 "map": self.options.params.to_dict(),
-                "frontend": self.options.frontend.to_dict(),
+                "frontend": self.frontend.to_dict(),
+                "topics": asdict(self.options.topics or BagTopics()),
             },
         )
 

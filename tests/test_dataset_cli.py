@@ -9,6 +9,7 @@ import pytest
 from app.cli import main
 from cogmap_core.datasets import MazeConfig, cache
 from cogmap_core.datasets.cache import (
+    DATASET_VERSION,
     cache_dir,
     cached_bags,
     default_dataset_file,
@@ -46,7 +47,7 @@ def test_cache_dir_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: P
 
 
 def test_default_dataset_name_describes_it() -> None:
-    assert default_dataset_file().name == "irat_australia_6laps_seed1_v2.bag"
+    assert default_dataset_file().name == f"irat_australia_6laps_seed1_v{DATASET_VERSION}.bag"
 
 
 def test_default_dataset_is_generated_once_and_reused(
@@ -58,7 +59,12 @@ def test_default_dataset_is_generated_once_and_reused(
     assert calls and calls[-1][0] == calls[-1][1]
     assert path.with_name(path.stem + "_maze.png").exists()
     assert sorted(p.name for p in tiny_default.iterdir() if not p.name.startswith(".")) == sorted(
-        [path.name, path.stem + "_camera.png", path.stem + "_maze.png"]
+        [
+            path.name,
+            path.stem + "_camera.png",
+            path.stem + "_maze.png",
+            path.stem + ".frontend.json",
+        ]
     )
 
     def fail(*args: object, **kwargs: object) -> None:

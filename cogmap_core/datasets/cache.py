@@ -26,7 +26,7 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
 CACHE_ENV = "COGMAP_CACHE"
-DATASET_VERSION = 2
+DATASET_VERSION = 4
 #: The default dataset's settings (the iRat-like layout, 6 laps).
 DEFAULT_CONFIG = MazeConfig()
 

@@ -37,6 +37,7 @@ from cogmap_core.datasets.motion import (
     odometry_messages,
     simulate_route,
 )
+from cogmap_core.datasets.profile import GENERATED_FRONTEND_PROFILE, write_frontend_profile
 from cogmap_core.datasets.render import CameraModel, MazeRenderer, encode_jpeg
 from cogmap_core.errors import CogmapError, ParameterError
 
@@ -502,6 +503,12 @@ def generate_maze_bag(
                 preview_jpeg = jpeg
         flush_until(math.inf)
 
+    write_frontend_profile(
+        out,
+        GENERATED_FRONTEND_PROFILE,
+        note="front-end settings for cogmap's rendered maze camera "
+        "(see cogmap_core/datasets/profile.py)",
+    )
     previews = _previews(out, plan, preview_jpeg) if preview else ()
     truth_end = plan.trajectory.pose_at(float(plan.odom_times[-1]))
     start = plan.trajectory.pose_at(0.0)

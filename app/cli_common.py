@@ -1,0 +1,122 @@
+"""Command-line options shared by several commands (dataset topics, map and front-end settings)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from cogmap_core.config import MapParams
+from cogmap_core.datasets.profile import read_frontend_profile
+from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
+from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.frontend import FrontEndConfig
+
+
+def add_topic_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--image-topic``, ``--odom-topic``, ``--gt-topic``, ``--no-ground-truth``."""
+    parser.add_argument("--image-topic", default=IMAGE_TOPIC, help=f"(default {IMAGE_TOPIC})")
+    parser.add_argument("--odom-topic", default=ODOMETRY_TOPIC, help=f"(default {ODOMETRY_TOPIC})")
+    parser.add_argument(
+        "--gt-topic", default=GROUND_TRUTH_TOPIC, help=f"(default {GROUND_TRUTH_TOPIC})"
+    )
+    parser.add_argument("--no-ground-truth", action="store_true", help="ignore the ground truth")
+
+
+def topics_from_args(args: argparse.Namespace) -> BagTopics:
+    """The topics chosen on the command line."""
+    return BagTopics(
+        image=args.image_topic,
+        odometry=args.odom_topic,
+        ground_truth=None if args.no_ground_truth else args.gt_topic,
+    )
+
+
+def add_map_arguments(parser: argparse.ArgumentParser) -> None:
+    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``."""
+    d = MapParams()
+    parser.add_argument(
+        "--alpha",
+        type=float,
+        default=d.alpha,
+        help=f"translation weight >= 0 (default {d.alpha:g})",
+    )
+    parser.add_argument(
+        "--beta", type=float, default=d.beta, help=f"rotation weight, >= 0 (default {d.beta:g})"
+    )
+    parser.add_argument(
+        "--delta", type=float, default=d.delta, help=f"field threshold, > 1 (default {d.delta:g})"
+    )
+    parser.add_argument(
+        "--t-interval",
+        type=float,
+        default=d.t_interval,
+        help=f"cluster interval threshold (s), > 0 (default {d.t_interval:g})",
+    )
+    parser.add_argument(
+        "--t-total",
+        type=float,
+        default=d.t_total,
+        help=f"cluster total-time threshold (s), > 0 (default {d.t_total:g})",
+    )
+
+
+def params_from_args(args: argparse.Namespace) -> MapParams:
+    """Map parameters from the command line (out-of-range values name the valid range)."""
+    return MapParams(
+        alpha=args.alpha,
+        beta=args.beta,
+        delta=args.delta,
+        t_interval=args.t_interval,
+        t_total=args.t_total,
+    )
+
+
+def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--frontend KEY=VALUE`` overrides of the front-end configuration."""
+    parser.add_argument(
+        "--frontend",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a front-end setting (repeatable), e.g. --frontend vt_match_threshold=0.03; "
+        "applied after the iRat defaults and the bag's <name>.frontend.json profile",
+    )
+
+
+def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
+    """The front-end config: iRat defaults, the bag's profile, then ``--frontend`` overrides."""
+    overrides: dict[str, float] = dict(read_frontend_profile(bag))
+    for item in args.frontend:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ParameterError(
+                f"--frontend {item!r}: write KEY=VALUE, e.g. vt_match_threshold=0.03"
+            )
+        try:
+            overrides[key.strip()] = float(value)
+        except ValueError:
+            raise ParameterError(f"--frontend {item!r}: {value!r} is not a number") from None
+    try:
+        return FrontEndConfig().with_changes(**overrides)
+    except TypeError as exc:
+        raise ParameterError(f"--frontend: {exc}") from None
+
+
+def resolve_bag(bag: str | None) -> Path:
+    """The bag to use: the given path, or the built-in default dataset (generated on first use)."""
+    if bag is not None:
+        path = Path(bag)
+        if not path.exists():
+            raise InputFileError(f"{path}: no such bag; give an existing .bag file or omit BAG")
+        return path
+    from cogmap_core.datasets.cache import default_dataset_path
+
+    return default_dataset_path(progress=_generation_progress)
+
+
+def _generation_progress(done: int, total: int) -> None:
+    sys.stderr.write(f"\rgenerating the default dataset (first use only): {done}/{total} frames")
+    if done >= total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
