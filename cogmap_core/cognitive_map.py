@@ -5,7 +5,10 @@ A :class:`CognitiveMap` consumes the front end's events (:mod:`cogmap_core.event
 - ``standard``: every proposed vertex and every link is kept (OpenRatSLAM's experience map with
   the paper's batch optimisation instead of graph relaxation).
 - ``scene_integration``: after each optimisation, revisited vertices that converged onto the
-  vertex they revisit are removed and their edges re-attached.
+  vertex they revisit are removed and their edges re-attached: the end of a loop-closure edge
+  that lies within ``integration_radius`` of the other end (the paper's cases A, B, C), and a
+  vertex created while revisiting -- joined by an edge to a vertex at least
+  ``integration_min_age`` seconds older -- that lies within that radius of it.
 - ``compact``: neighborhood fields decline proposed vertices whose movement since the current
   vertex is not novel (g(d, theta) = (1 + alpha d)(1 + beta |theta|) <= delta) and merge the
   sequential edges; plus scene integration; plus removal of short edges.
@@ -35,6 +38,7 @@ from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.geometry import (
+    between,
     compose,
     compose_scalar,
     inverse_scalar,
@@ -182,6 +186,7 @@ class CognitiveMap:
         self._current = -1
         self._accum = [0.0, 0.0, 0.0]
         self._last_time = -math.inf
+        self._integrated_until = -math.inf
         # records
         self.optimizations: list[OptimizationRecord] = []
         self.declined_vertices = 0
@@ -544,12 +549,58 @@ class CognitiveMap:
             a, b = int(self._efrom[k]), int(self._eto[k])
             newer, older = (a, b) if a > b else (b, a)
             # pose of `newer` in the frame of `older`, from the loop-closure measurement
-            rel = self._erel[k].tolist()
-            offset = inverse_scalar(rel) if newer == a else tuple(rel)
+            # the pose of `newer` in the frame of `older`, as the optimisation converged
+            offset = tuple(between(self._pose[older], self._pose[newer]).tolist())
             self._remove_edge(k)
             self._merge_vertex(newer, older, offset)
             removed += 1
+        removed += self._integrate_revisits()
         self.integrated_vertices += removed
+        return removed
+
+    def _integrate_revisits(self) -> int:
+        """Merge new vertices that converged onto an older vertex they are connected to.
+
+        A vertex created since the previous integration that is joined by an edge to a vertex
+        at least ``integration_min_age`` seconds older was created while the robot revisited
+        mapped territory (it continues from, or closes onto, an old place). If after the
+        optimisation it lies within ``integration_radius`` of that old vertex, it is merged into
+        it (the nearest such neighbour), its edges re-attached with the optimised relative pose.
+        """
+        p = self.params
+        n = self._num_ids
+        since = self._integrated_until
+        self._integrated_until = self._last_time
+        new = np.flatnonzero(self._alive[:n] & (self._vtime[:n] > since))
+        if new.size == 0 or p.integration_radius <= 0:
+            return 0
+        live = self._live_edges()
+        adjacency: dict[int, set[int]] = {}
+        for a, b in zip(self._efrom[live].tolist(), self._eto[live].tolist(), strict=True):
+            adjacency.setdefault(a, set()).add(b)
+            adjacency.setdefault(b, set()).add(a)
+        removed = 0
+        for u in new.tolist():
+            if not self._alive[u]:
+                continue
+            oldest = self._vtime[u] - p.integration_min_age
+            old = [v for v in adjacency.get(u, ()) if self._alive[v] and self._vtime[v] <= oldest]
+            if not old:
+                continue
+            candidates = np.array(old, dtype=np.int64)
+            distance = np.hypot(*(self._pose[candidates, :2] - self._pose[u, :2]).T)
+            best = int(np.argmin(distance))
+            if distance[best] > p.integration_radius:
+                continue
+            v = int(candidates[best])
+            self._merge_vertex(u, v, tuple(between(self._pose[v], self._pose[u]).tolist()))
+            removed += 1
+            neighbours = adjacency.pop(u, set()) - {u, v}
+            adjacency.setdefault(v, set()).update(neighbours)
+            adjacency[v].discard(u)
+            for w in neighbours:
+                adjacency[w].discard(u)
+                adjacency[w].add(v)
         return removed
 
     def _remove_short_edges(self) -> int:

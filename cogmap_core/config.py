@@ -19,6 +19,7 @@ _RANGES: dict[str, tuple[float, bool, float, str]] = {
     "short_edge_threshold": (0.0, True, 1e9, "edges shorter than this are removed (m)"),
     "integration_radius": (0.0, True, 1e9, "max distance of a revisit to merge it (m)"),
     "integration_max_residual": (0.0, True, 1e9, "max loop-edge residual to merge a revisit"),
+    "integration_min_age": (0.0, True, 1e9, "min age of the vertex a revisit merges into (s)"),
 }
 
 
@@ -44,6 +45,9 @@ class MapParams:
             (after optimisation) is merged into it (scene integration).
         integration_max_residual: ... provided the loop-closure edge between them converged,
             i.e. its residual norm after optimisation is at most this (outliers are kept apart).
+        integration_min_age: a new vertex joined by an edge to a vertex at least this many
+            seconds older was made while revisiting; within ``integration_radius`` of that
+            vertex after optimisation, it is merged into it.
 
     """
 
@@ -56,6 +60,7 @@ class MapParams:
     short_edge_threshold: float = 0.05
     integration_radius: float = 0.3
     integration_max_residual: float = 0.1
+    integration_min_age: float = 10.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range."""

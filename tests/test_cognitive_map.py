@@ -468,3 +468,45 @@ def test_parameters_are_validated_with_ranges():
         MapParams(t_interval=0)
     with pytest.raises(ParameterError, match="unknown map parameter"):
         MapParams().with_changes(gamma=1.0)
+
+
+# ------------------------------------------------------------------------------------------
+# revisits without a loop-closure edge of their own
+# ------------------------------------------------------------------------------------------
+
+
+def revisit_after(wait: float, step: float) -> Script:
+    """Map 0 -> 1 -> 2 (0.4 m apart), wait, back to 1 (re-localised), move ``step``, new vertex."""
+    s = Script()
+    s.create()  # 0 (0, 0)
+    s.move(0.4)
+    s.create()  # 1 (0.4, 0)
+    s.move(0.4)
+    s.create()  # 2 (0.8, 0)
+    s.move(-0.4)  # reverse back to vertex 1
+    s.wait(wait)
+    s.link(1)  # a loop closure from 2 to 1 (robot at 1)
+    s.set_current(1)
+    s.move(step)
+    s.create()  # 3: created from the old vertex 1, never linked itself
+    s.wait(3.0)
+    return s
+
+
+def test_revisit_vertex_merges_into_the_old_vertex_it_continues_from():
+    s = revisit_after(wait=15.0, step=0.05)
+    standard = build("standard", s)
+    assert standard.snapshot().vertex_ids.tolist() == [0, 1, 2, 3]
+    cmap = build("scene_integration", s)
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 2]
+    assert cmap.resolve(3)[0] == 1
+    np.testing.assert_allclose(cmap.vertex_pose(3), s.truth[3], atol=1e-9)
+    assert edges_of(cmap) == {(0, 1), (1, 2), (2, 1)}
+
+
+def test_revisit_vertex_kept_when_too_recent_or_too_far():
+    recent = build("scene_integration", revisit_after(wait=1.0, step=0.05))
+    assert 3 in recent.snapshot().vertex_ids.tolist()  # vertex 1 is only ~2 s older
+    far_script = revisit_after(wait=15.0, step=0.35)
+    far = build("scene_integration", far_script)
+    assert 3 in far.snapshot().vertex_ids.tolist()  # 0.35 m > integration_radius
