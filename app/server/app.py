@@ -163,6 +163,7 @@ class CogmapApp:
         self._suppress_param_events = False
         self._camera_extent: tuple[float, float, float, float] | None = None
         self._pending_frame: tuple[Frame, int | None] | None = None
+        self._local = threading.local()
         self.exports: list[Path] = []
         self.replay = Replay(
             bag,
@@ -342,7 +343,7 @@ class CogmapApp:
         cx, cy = (extent[0] + extent[1]) / 2, (extent[2] + extent[3]) / 2
         span = max(extent[1] - extent[0], extent[3] - extent[2], 1.0)
         if top:
-            return (cx, cy - 0.05 * span, 1.25 * span + 0.5), (cx, cy, 0.0)
+            return (cx, cy - 0.05 * span, 0.9 * span + 0.4), (cx, cy, 0.0)
         return (cx + 0.5 * span, cy - 0.9 * span, 0.8 * span), (cx, cy, 0.0)
 
     def _update_initial_camera(self) -> None:
@@ -380,6 +381,8 @@ class CogmapApp:
         self.replay.set_speed(speed)
 
     def _on_seek(self) -> None:
+        if getattr(self._local, "setting_seek", False):
+            return  # the slider following playback, not a user
         value = self.seek_slider.value
         if not math.isfinite(value):
             return
@@ -538,6 +541,14 @@ class CogmapApp:
             fraction = 100.0
         if abs(self.progress.value - fraction) >= 0.1:
             self.progress.value = fraction
+        if r.state in (PlaybackState.PAUSED, PlaybackState.ENDED) and not math.isnan(r.frame_time):
+            position = round(min(r.frame_time, self.seek_slider.max), 1)
+            if abs(self.seek_slider.value - position) > 0.05:
+                self._local.setting_seek = True  # (callbacks run on this thread)
+                try:
+                    self.seek_slider.value = position
+                finally:
+                    self._local.setting_seek = False
         self._sync_play_button()
 
     def _loop_closures_detected(self) -> int:
