@@ -77,10 +77,8 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
     ids: list[int] = []
     poses: list[list[float]] = []
     index_of: dict[int, int] = {}
-    edges: list[
-        tuple[int, int, int, int, list[float], list[float]]
-    ] = []  # (line, id_i, id_j, fmt..)
-    edge_formats: list[str] = []
+    # (line, id_i, id_j, measurement, information values, format)
+    edges: list[tuple[int, int, int, list[float], list[float], str]] = []
     fixed_ids: list[tuple[int, int]] = []
     for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
@@ -110,8 +108,7 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
                 raise G2oFormatError(
                     f"{path}:{lineno}: {tag} links vertex {vi} to itself; remove the line"
                 )
-            edges.append((lineno, vi, vj, 0, values[:3], values[3:]))
-            edge_formats.append(_EDGE_TAGS[tag])
+            edges.append((lineno, vi, vj, values[:3], values[3:], _EDGE_TAGS[tag]))
         elif tag == "FIX":
             for token in tokens[1:]:
                 fixed_ids.append((lineno, _vertex_id(path, lineno, tag, token)))
@@ -130,9 +127,7 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
     edge_to = np.empty(n_edges, dtype=np.int64)
     measurements = np.empty((n_edges, 3))
     information = np.empty((n_edges, 3, 3))
-    for k, ((lineno, vi, vj, _, meas, info), fmt) in enumerate(
-        zip(edges, edge_formats, strict=True)
-    ):
+    for k, (lineno, vi, vj, meas, info, fmt) in enumerate(edges):
         for vid in (vi, vj):
             if vid not in index_of:
                 raise G2oFormatError(
