@@ -11,7 +11,14 @@ import webbrowser
 from pathlib import Path
 from types import FrameType
 
-from app.cmd_run import add_map_arguments, params_from_args
+from app.cli_common import (
+    add_frontend_arguments,
+    add_map_arguments,
+    add_topic_arguments,
+    frontend_from_args,
+    params_from_args,
+    topics_from_args,
+)
 from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.errors import InputFileError, ParameterError
 
@@ -53,6 +60,8 @@ def display_url(host: str, port: int) -> str:
 
 def _serve(args: argparse.Namespace) -> int:
     params = params_from_args(args)  # validate before starting anything
+    topics = topics_from_args(args)
+    frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile read)
     if not 0 < args.port < 65536:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
     import viser
@@ -73,6 +82,8 @@ def _serve(args: argparse.Namespace) -> int:
         speed=args.speed,
         autoplay=not args.paused,
         static_dir=Path(args.static) if args.static else None,
+        frontend=lambda bag_path: frontend_from_args(args, bag_path),
+        topics=topics,
     )
     stop = threading.Event()
 
@@ -132,4 +143,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="folder of web-facing assets; HTML replays go to DIR/replays (default: static/)",
     )
     add_map_arguments(parser)
+    add_frontend_arguments(parser)
+    add_topic_arguments(parser)
     parser.set_defaults(func=_serve)

@@ -26,6 +26,7 @@ from app.server.export import g2o_bytes, save_html_replay, summary_dict
 from app.server.replay import PARAMS_USED, PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
+from cogmap_core.datasets.profile import profile_path
 from cogmap_core.g2o import read_g2o
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
@@ -386,6 +387,7 @@ def test_a_bag_corrupt_mid_replay_keeps_what_was_mapped(
     data[middle + 3] = 0x09  # a message record in the middle of the bag: unknown record type
     broken = tmp_path / "broken.bag"
     broken.write_bytes(bytes(data))
+    profile_path(broken).write_bytes(profile_path(short_bag).read_bytes())  # same front end
     with running_app(broken) as app:
         wait(app)
         r = app.replay

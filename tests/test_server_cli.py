@@ -123,6 +123,8 @@ def test_bad_arguments_fail_fast_with_one_line(capsys: pytest.CaptureFixture[str
     assert "\n" not in err
     assert main(["serve", "--port", "70000"]) == 2
     assert "port 70000 is out of range" in capsys.readouterr().err
+    assert main(["serve", "--frontend", "vt_match_threshold"]) == 2
+    assert "write KEY=VALUE" in capsys.readouterr().err
 
 
 def test_display_url() -> None:

@@ -20,6 +20,7 @@ import viser
 from app.server.app import CogmapApp
 from cogmap_core.cognitive_map import CognitiveMap
 from cogmap_core.datasets import MazeConfig, generate_maze_bag, open_bag
+from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.slam import SlamSession
 
 # One lap of the figure-eight maze at 6 frames/s: about 400 frames, 67 s of data.
@@ -35,7 +36,7 @@ def short_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def reference(short_bag: Path) -> SlamSession:
-    session = SlamSession()
+    session = SlamSession(frontend_config=frontend_config_for(short_bag))  # as cogmap run
     with open_bag(short_bag, image_scale=4) as reader:
         session.run(reader.frames())
     return session

@@ -32,7 +32,7 @@ from app.server.export import (
     sizes_csv_bytes,
     summary_bytes,
 )
-from app.server.replay import BagSource, PlaybackState, Replay
+from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
 from app.server.scene import (
     MAP_COLORS,
     SceneStreamer,
@@ -40,10 +40,10 @@ from app.server.scene import (
 )
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams, parameter_range
+from cogmap_core.datasets import BagTopics
 from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.events import LinkToVertex
 from cogmap_core.frames import Frame
-from cogmap_core.frontend import FrontEndConfig
 
 MODE_LABELS: dict[str, MapMode] = {m.value: m for m in MapMode}
 SPEEDS: dict[str, float] = {
@@ -125,11 +125,14 @@ class CogmapApp:
         server: the viser server to build the page on.
         bag: the bag (or a function generating the built-in one).
         params: initial map parameters (the paper's by default).
-        frontend: front-end configuration.
+        frontend: front-end configuration or a function of the bag choosing it (default: the
+            bag's profile, as ``cogmap run``).
         speed: initial playback speed.
         autoplay: start playing as soon as the bag is open.
         static_dir: default folder for saved HTML replays.
         scene_hz: maximum map updates per second during playback.
+        image_scale: JPEG decode reduction (1, 2, 4, 8).
+        topics: the bag's topic names.
 
     """
 
@@ -138,12 +141,13 @@ class CogmapApp:
         server: viser.ViserServer,
         bag: BagSource,
         params: MapParams | None = None,
-        frontend: FrontEndConfig | None = None,
+        frontend: FrontEndSource = None,
         speed: float = 1.0,
         autoplay: bool = True,
         static_dir: Path | None = None,
         scene_hz: float = 10.0,
         image_scale: int = 4,
+        topics: BagTopics | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
         for spec in SLIDERS + ADVANCED_SLIDERS:
@@ -173,6 +177,7 @@ class CogmapApp:
             speed=speed,
             autoplay=autoplay,
             image_scale=image_scale,
+            topics=topics,
         )
         self.streamer = SceneStreamer(server)
         self._build_gui(params or MapParams(), speed, autoplay)

@@ -31,7 +31,8 @@ from typing import Protocol
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagReader, open_bag
+from cogmap_core.datasets import BagReader, BagTopics, open_bag
+from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError
 from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEndConfig
@@ -39,6 +40,8 @@ from cogmap_core.slam import ALL_MODES, SlamSession
 
 GenerationProgress = Callable[[int, int], None]
 BagSource = Path | Callable[[GenerationProgress], Path]
+#: A front-end configuration, or a function choosing it for the bag once it is known.
+FrontEndSource = FrontEndConfig | Callable[[Path], FrontEndConfig] | None
 
 #: Events applied between two checks for a newer request during a rebuild.
 REBUILD_CHUNK = 1000
@@ -126,7 +129,9 @@ class Replay:
             dataset, generated on first use).
         listener: receives updates (on the worker thread).
         params: initial map parameters.
-        frontend: front-end configuration.
+        frontend: front-end configuration, or a function of the bag giving it (default: the
+            iRat defaults with the bag's ``<name>.frontend.json`` profile, as ``cogmap run``).
+        topics: the bag's topic names (default: the iRat 2011 Australia bag's).
         image_scale: JPEG decode reduction (1, 2, 4, 8).
         speed: playback speed (data seconds per wall second; ``math.inf``: as fast as possible).
         autoplay: start playing as soon as the bag is open.
@@ -139,16 +144,21 @@ class Replay:
         bag: BagSource,
         listener: ReplayListener,
         params: MapParams | None = None,
-        frontend: FrontEndConfig | None = None,
+        frontend: FrontEndSource = None,
         image_scale: int = 4,
         speed: float = 1.0,
         autoplay: bool = True,
         priority: tuple[MapMode, ...] = (MapMode.COMPACT,),
+        topics: BagTopics | None = None,
     ) -> None:
         """Set up the replay (nothing is read until :meth:`start`)."""
         self.bag_source = bag
         self.listener = listener
-        self.frontend_config = frontend
+        self.frontend_source = frontend
+        self.frontend_config: FrontEndConfig | None = (
+            frontend if isinstance(frontend, FrontEndConfig) else None
+        )
+        self.topics = topics
         self.image_scale = image_scale
         self.lock = threading.RLock()
         self._cond = threading.Condition()
@@ -165,7 +175,7 @@ class Replay:
         self._stopping = False
         self._generation = 0  # bumped by every request that should interrupt a rebuild
         # worker-owned state (read by others under `lock`)
-        self.session = SlamSession(self._target_params, frontend)
+        self.session = SlamSession(self._target_params, self.frontend_config)
         self.cursor = 0  # frames applied to the maps
         self.at_end = False
         self.state = PlaybackState.LOADING
@@ -394,7 +404,9 @@ class Replay:
         try:
             path = self._resolve_bag()
             self.bag_path = path
-            reader = open_bag(path, image_scale=self.image_scale)
+            reader = open_bag(path, topics=self.topics, image_scale=self.image_scale)
+            if self.session.log.frames == 0:  # the front end is chosen for the bag
+                self._choose_frontend(path)
         except CogmapError as exc:
             self._fail(str(exc))
             return
@@ -414,6 +426,18 @@ class Replay:
             self.state = PlaybackState.PLAYING if self._playing else PlaybackState.PAUSED
         self._notify_status()
         self._notify_maps(ALL_MODES, True)
+
+    def _choose_frontend(self, path: Path) -> None:
+        source = self.frontend_source
+        if isinstance(source, FrontEndConfig):
+            config = source
+        elif source is None:
+            config = frontend_config_for(path)
+        else:
+            config = source(path)
+        with self.lock:
+            self.frontend_config = config
+            self.session = SlamSession(self._target_params, config)
 
     def _resolve_bag(self) -> Path:
         source = self.bag_source
