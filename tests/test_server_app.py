@@ -13,6 +13,7 @@ import io
 import json
 import time
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 
 import msgspec
@@ -30,7 +31,7 @@ from cogmap_core.datasets.profile import profile_path
 from cogmap_core.g2o import read_g2o
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
-from tests.test_server_support import assert_same_map, counter, running_app
+from tests.test_server_support import assert_same_map, counter, make_server, running_app
 
 short_bag = support.short_bag  # session fixtures shared by the web-app tests
 reference = support.reference
@@ -468,3 +469,34 @@ def test_a_late_client_receives_the_full_current_map(
             except TimeoutError:
                 pass
         assert size > reference.maps[MapMode.COMPACT].num_vertices * 3 * 4
+
+
+def test_the_built_in_dataset_is_prepared_with_progress_on_the_page(
+    short_bag: Path, reference: SlamSession
+) -> None:
+    seen: list[str] = []
+
+    def built_in(progress: Callable[[int, int], None]) -> Path:
+        for done in (100, 200):
+            progress(done, 200)
+        return short_bag
+
+    server = make_server()
+    app = CogmapApp(server, built_in, speed=float("inf"))
+    original = app.on_status
+
+    def record(replay: object) -> None:
+        seen.append(app.replay.message)
+        original(replay)  # type: ignore[arg-type]
+
+    app.on_status = record  # type: ignore[method-assign]
+    try:
+        app.start()
+        wait(app)
+        assert "generating the built-in dataset: 100/200 frames" in seen
+        assert "generating the built-in dataset: 200/200 frames" in seen
+        assert app.replay.bag_path == short_bag and app.replay.state is PlaybackState.ENDED
+        assert_same_map(app.replay.session.maps[MapMode.COMPACT], reference.maps[MapMode.COMPACT])
+    finally:
+        app.stop()
+        server.stop()
