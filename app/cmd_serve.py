@@ -90,7 +90,9 @@ def _serve(args: argparse.Namespace) -> int:
     def on_signal(signum: int, frame: FrameType | None) -> None:
         stop.set()
 
-    previous = signal.signal(signal.SIGTERM, on_signal)
+    # Ctrl-C and SIGTERM (docker stop) both stop cleanly, even where SIGINT was inherited as
+    # ignored (a background job of a script).
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         app.start()
         print(f"cogmap serve: {url}  (Ctrl-C to stop)", flush=True)
@@ -101,7 +103,8 @@ def _serve(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         print("cogmap serve: stopping", file=sys.stderr, flush=True)
         app.stop()
         server.stop()
