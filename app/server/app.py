@@ -333,7 +333,9 @@ class CogmapApp:
             self._publish_scene()
             self._update_counters()
             self._update_log(force=True)
-        self.replay_path.value = str(default_replay_path(self.static_dir, modes[0]))
+        defaults = {str(default_replay_path(self.static_dir, m)) for m in MapMode}
+        if self.replay_path.value in defaults:  # keep a path the user typed
+            self.replay_path.value = str(default_replay_path(self.static_dir, modes[0]))
 
     def _set_camera(self, client: viser.ClientHandle | None, top: bool) -> None:
         position, look_at = self._camera_pose(top)
