@@ -187,6 +187,8 @@ class CognitiveMap:
         self._accum = [0.0, 0.0, 0.0]
         self._last_time = -math.inf
         self._integrated_until = -math.inf
+        self._edges_at_last_optimization = 0
+        self._optimized_once = False
         # records
         self.optimizations: list[OptimizationRecord] = []
         self.declined_vertices = 0
@@ -392,11 +394,13 @@ class CognitiveMap:
         acc = self._accum
         to_experience = (acc[0], acc[1], acc[2] - event.relative_rad)
         rel = compose_scalar(to_experience, inverse_scalar(offset))
-        if target == self._current:
-            return  # the link closes on the vertex we are at (after merges): nothing to add
+        # Every loop closure the front end detects joins the time clustering, so the three maps
+        # share one schedule of batch optimisations, even when this map needs no new edge.
         cluster_id, closed = self.clusterer.add_edge(event.time)
         if closed is not None:  # cannot happen after due(), kept for safety
             self._optimize(closed.cluster_id, event.time)
+        if target == self._current:
+            return  # the link closes on the vertex we are at (after merges): nothing to add
         self._add_edge(self._current, target, rel, event.time, EdgeKind.LOOP_CLOSURE, cluster_id)
 
     def _on_set(self, event: SetCurrentVertex) -> None:
@@ -496,12 +500,19 @@ class CognitiveMap:
         return self._optimize(-1, t)
 
     def _optimize(self, cluster_id: int, t: float) -> OptimizationRecord | None:
+        if self._edges_at_last_optimization == self._num_edges_total and self._optimized_once:
+            return None  # no edge added since the last optimisation: it would change nothing
+        self._edges_at_last_optimization = self._num_edges_total
+        self._optimized_once = True
         graph = self.to_pose_graph()
         if graph.num_edges == 0:
             return None
         started = wallclock.perf_counter()
         result = optimize_pose_graph(
-            graph, OptimizerOptions(huber_scale=self.params.huber_scale, initialization="none")
+            graph,
+            OptimizerOptions(
+                huber_scale=self.params.huber_scale, initialization="none", function_tolerance=1e-5
+            ),
         )
         wall = wallclock.perf_counter() - started
         self._pose[graph.vertex_ids] = result.poses

@@ -48,6 +48,7 @@ from cogmap_core.posegraph import PoseGraph
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+_IDENTITY = np.eye(3)
 AUTO_LAGO_COST_PER_EDGE = 1.0
 """With ``initialization="auto"``: LAGO when the initial cost exceeds this many units per edge."""
 
@@ -125,18 +126,20 @@ class EdgeModel:
 
     def __init__(self, measurements: FloatArray, information: FloatArray) -> None:
         """Precompute whitening from measurements ``(E, 3)`` and information ``(E, 3, 3)``."""
-        try:
-            lower = np.linalg.cholesky(information)  # Omega = L L^T, so S = L^T
-        except np.linalg.LinAlgError:
-            raise OptimizationError(
-                "an edge information matrix is not positive definite; fix the edge weights"
-            ) from None
-        sqrt_info = lower.transpose(0, 2, 1)
         cz, sz = np.cos(measurements[:, 2]), np.sin(measurements[:, 2])
         rz_t = np.zeros_like(information)
         rz_t[:, 0, 0], rz_t[:, 0, 1], rz_t[:, 1, 0], rz_t[:, 1, 1] = cz, sz, -sz, cz
         rz_t[:, 2, 2] = 1.0
-        self.whitening = sqrt_info @ rz_t
+        if (information == _IDENTITY).all():  # the cognitive map's edges: no whitening needed
+            self.whitening = rz_t
+        else:
+            try:
+                lower = np.linalg.cholesky(information)  # Omega = L L^T, so S = L^T
+            except np.linalg.LinAlgError:
+                raise OptimizationError(
+                    "an edge information matrix is not positive definite; fix the edge weights"
+                ) from None
+            self.whitening = lower.transpose(0, 2, 1) @ rz_t
         self.tx = measurements[:, 0].copy()
         self.ty = measurements[:, 1].copy()
         self.ttheta = measurements[:, 2].copy()
@@ -516,7 +519,10 @@ def optimize_pose_graph(
     if termination == "FAILURE" or not np.isfinite(poses).all():
         raise OptimizationError(f"Ceres failed: {summary.message}")
     poses[:, 2] = wrap_angle(poses[:, 2])
-    final_cost = graph_cost(graph, poses, options.huber_scale)
+    # Ceres' cost is the robust cost itself (the snapshot residual is zero)
+    final_cost = float(summary.final_cost)
+    if not use_lago:
+        initial_cost = float(summary.initial_cost)
     return OptimizationResult(
         poses=poses,
         initial_cost=initial_cost,
