@@ -248,9 +248,38 @@ class CognitiveMap:
         self._record_size(t)
 
     def apply_all(self, events: list[MapEvent] | tuple[MapEvent, ...]) -> None:
-        """Apply several events in order."""
+        """Apply several events in order (same result as :meth:`apply` on each, faster).
+
+        Runs of odometry events -- most of a replay -- take an inlined path; every other event,
+        and any odometry event that could close a cluster or breaks the contract, goes through
+        :meth:`apply`.
+        """
+        odometry = Odometry
+        isfinite = math.isfinite
+        cos, sin, pi = math.cos, math.sin, math.pi
+        clusterer = self.clusterer
         for event in events:
-            self.apply(event)
+            if type(event) is not odometry:
+                self.apply(event)
+                continue
+            t = event.time
+            trans, rot = event.translation, event.rotation
+            if not (t >= self._last_time and t != math.inf and isfinite(trans) and isfinite(rot)):
+                self.apply(event)  # raises the contract error
+                continue
+            cluster = clusterer.open_cluster
+            if cluster is not None and (
+                t - cluster.last_time >= clusterer.t_interval
+                or t - cluster.start_time > clusterer.t_total
+            ):
+                self.apply(event)  # closes the cluster: optimisation and integration
+                continue
+            self._last_time = t
+            acc = self._accum
+            heading = (acc[2] + rot + pi) % TWO_PI - pi
+            acc[2] = heading
+            acc[0] += trans * cos(heading)
+            acc[1] += trans * sin(heading)
 
     def finish(self, time: float | None = None) -> None:
         """End of data: close the open cluster (if any) and run its batch optimisation."""

@@ -510,3 +510,20 @@ def test_revisit_vertex_kept_when_too_recent_or_too_far():
     far_script = revisit_after(wait=15.0, step=0.35)
     far = build("scene_integration", far_script)
     assert 3 in far.snapshot().vertex_ids.tolist()  # 0.35 m > integration_radius
+
+
+@pytest.mark.parametrize("mode", ["standard", "scene_integration", "compact"])
+def test_apply_all_fast_path_equals_event_by_event(mode):
+    s = square_laps(5, noise=0.7, seed=4)
+    params = MapParams(t_interval=0.5, t_total=3.0)
+    one_by_one = CognitiveMap(mode, params)
+    for event in s.events:
+        one_by_one.apply(event)
+    one_by_one.finish()
+    batched = build(mode, s, params)
+    a, b = one_by_one.snapshot(), batched.snapshot()
+    assert len(one_by_one.optimizations) == len(batched.optimizations) > 5
+    np.testing.assert_array_equal(a.vertex_ids, b.vertex_ids)
+    np.testing.assert_array_equal(a.poses, b.poses)
+    np.testing.assert_array_equal(a.edge_rel, b.edge_rel)
+    assert [o.time for o in one_by_one.optimizations] == [o.time for o in batched.optimizations]
