@@ -6,6 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
+from app.cli_common import add_topic_arguments, topics_from_args
 from app.progress import ProgressBar
 from cogmap_core.datasets.cache import (
     CACHE_ENV,
@@ -18,12 +19,6 @@ from cogmap_core.datasets.cache import (
 from cogmap_core.datasets.generator import ProgressFn
 from cogmap_core.datasets.layout import builtin_layouts, load_layout
 from cogmap_core.datasets.rosbag_reader import open_bag
-from cogmap_core.datasets.topics import (
-    GROUND_TRUTH_TOPIC,
-    IMAGE_TOPIC,
-    ODOMETRY_TOPIC,
-    BagTopics,
-)
 
 
 def _progress_bar(label: str) -> tuple[ProgressBar, ProgressFn]:
@@ -77,11 +72,7 @@ def _regenerate(args: argparse.Namespace) -> int:
 
 
 def _info(args: argparse.Namespace) -> int:
-    topics = BagTopics(
-        image=args.image_topic,
-        odometry=args.odom_topic,
-        ground_truth=None if args.no_ground_truth else args.gt_topic,
-    )
+    topics = topics_from_args(args)
     path = Path(args.bag) if args.bag else _generate(regenerate=False, workers=None)
     with open_bag(path, topics=topics, image_scale=args.image_scale) as reader:
         info = reader.info
@@ -140,10 +131,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_regenerate)
     p = sub.add_parser("info", help="describe a bag (default: the default dataset)")
     p.add_argument("bag", nargs="?", default=None, help="bag file or ROS2 bag folder")
-    p.add_argument("--image-topic", default=IMAGE_TOPIC, help=f"(default {IMAGE_TOPIC})")
-    p.add_argument("--odom-topic", default=ODOMETRY_TOPIC, help=f"(default {ODOMETRY_TOPIC})")
-    p.add_argument("--gt-topic", default=GROUND_TRUTH_TOPIC, help=f"(default {GROUND_TRUTH_TOPIC})")
-    p.add_argument("--no-ground-truth", action="store_true", help="ignore the ground truth")
+    add_topic_arguments(p)
     p.add_argument(
         "--scan", action="store_true", help="read every frame: read speed and data warnings"
     )

@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import viser  # noqa: E402
 
+from app.cli_common import resolve_bag  # noqa: E402
 from app.server.app import CogmapApp  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 
@@ -55,12 +56,7 @@ def main() -> int:
     parser.add_argument("bag", nargs="?", default=None, help="bag (default: built-in dataset)")
     parser.add_argument("--storm", type=int, default=60, help="slider events in the storm")
     args = parser.parse_args()
-    if args.bag is None:
-        from cogmap_core.datasets.cache import default_dataset_path
-
-        bag = default_dataset_path()
-    else:
-        bag = Path(args.bag)
+    bag = resolve_bag(args.bag)  # default: the built-in dataset
     with contextlib.redirect_stdout(io.StringIO()):
         server = viser.ViserServer(host="127.0.0.1", port=8090, verbose=False)
     app = CogmapApp(server, bag, speed=math.inf)

@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import viser  # noqa: E402
 
+from app.cli_common import resolve_bag  # noqa: E402
 from app.server.app import CogmapApp  # noqa: E402
 
 ARGS = [
@@ -45,12 +46,7 @@ def main() -> int:
     args = parser.parse_args()
     from playwright.sync_api import sync_playwright
 
-    if args.bag is None:
-        from cogmap_core.datasets.cache import default_dataset_path
-
-        bag = default_dataset_path()
-    else:
-        bag = Path(args.bag)
+    bag = resolve_bag(args.bag)  # default: the built-in dataset
     with contextlib.redirect_stdout(io.StringIO()):
         server = viser.ViserServer(host="127.0.0.1", port=8093, verbose=False)
     app = CogmapApp(server, bag, speed=math.inf)
