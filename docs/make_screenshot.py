@@ -21,19 +21,7 @@ import viser  # noqa: E402
 
 from app.cli_common import resolve_bag  # noqa: E402
 from app.server.app import CogmapApp  # noqa: E402
-
-ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-]
+from tests.test_server_support import CHROMIUM_ARGS  # noqa: E402
 
 
 def main() -> int:
@@ -55,7 +43,7 @@ def main() -> int:
         raise SystemExit("the replay did not finish")
     print(f"replayed {app.replay.cursor} frames: {app.replay.state.value} {app.replay.message}")
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=ARGS)
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": args.width, "height": args.height})
         page.goto(f"http://127.0.0.1:{server.get_port()}")
         page.locator("#cogmap-compact-vertices").wait_for(timeout=30_000)

@@ -33,18 +33,7 @@ reference = support.reference
 
 CHROMIUM = os.environ.get("COGMAP_CHROMIUM", "/usr/bin/chromium")
 REQUIRED = bool(os.environ.get("COGMAP_REQUIRE_BROWSER"))
-ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-]
+ARGS = support.CHROMIUM_ARGS
 ARTIFACTS = Path(
     os.environ.get("COGMAP_ARTIFACTS", Path(tempfile.gettempdir()) / "cogmap-artifacts")
 )

@@ -82,3 +82,18 @@ def counter(app: CogmapApp, key: str) -> str:
     match = re.search(rf'id="cogmap-{re.escape(key)}"[^>]*>([^<]*)<', app.counters_html.content)
     assert match is not None, f"no counter {key} in {app.counters_html.content}"
     return match.group(1)
+
+
+#: Flags for Debian's Chromium, headless on a machine without GPU or network (software WebGL).
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
