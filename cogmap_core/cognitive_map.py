@@ -43,7 +43,6 @@ from cogmap_core.geometry import (
     compose_scalar,
     inverse_scalar,
     relative_to_polar,
-    wrap_angle,
     wrap_scalar,
 )
 from cogmap_core.optimizer import EdgeModel, OptimizerOptions, edge_terms, optimize_pose_graph
@@ -425,9 +424,7 @@ class CognitiveMap:
         rel = compose_scalar(to_experience, inverse_scalar(offset))
         # Every loop closure the front end detects joins the time clustering, so the three maps
         # share one schedule of batch optimisations, even when this map needs no new edge.
-        cluster_id, closed = self.clusterer.add_edge(event.time)
-        if closed is not None:  # cannot happen after due(), kept for safety
-            self._optimize(closed.cluster_id, event.time)
+        cluster_id, _ = self.clusterer.add_edge(event.time)  # apply() already closed a due one
         if target == self._current:
             return  # the link closes on the vertex we are at (after merges): nothing to add
         self._add_edge(self._current, target, rel, event.time, EdgeKind.LOOP_CLOSURE, cluster_id)
@@ -759,5 +756,4 @@ __all__ = [
     "MapSnapshot",
     "OptimizationRecord",
     "neighborhood_field",
-    "wrap_angle",
 ]
