@@ -1,16 +1,33 @@
-"""Accuracy measures against ground truth: rigid 2D alignment, ATE, loop-closure precision."""
+"""Accuracy measures against ground truth.
+
+- rigid 2-D alignment and ATE (RMSE of positions after the best alignment);
+- dead reckoning: the odometry integrated on its own, the baseline every map must beat;
+- loop-closure precision: a link is true when both the position *and* the heading it claims
+  agree with the ground truth within set tolerances;
+- layout fidelity: how much of the true path a map covers (completeness) and how much of the
+  map lies on the true path (correctness), both at a radius ``r``, after aligning the map's
+  vertices (at their creation times) to the ground truth.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 FloatArray = NDArray[np.float64]
 
 TRUE_LOOP_CLOSURE_DISTANCE = 0.1
-"""A loop closure is true when the ground-truth positions of its two ends are this close (m)."""
+"""A loop closure is true when the ground-truth positions of its two ends are this close (m) ..."""
+
+TRUE_LOOP_CLOSURE_HEADING = math.radians(10.0)
+"""... and the heading it claims is this close to the true relative heading (rad)."""
+
+LAYOUT_RADIUS = 0.08
+"""Default radius of layout completeness and correctness (m)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,11 +89,24 @@ def interpolate_poses(times: FloatArray, poses: FloatArray, query: FloatArray) -
 
 @dataclass(frozen=True, slots=True)
 class LoopClosureScore:
-    """Loop closures judged by ground truth."""
+    """Loop closures judged by ground truth.
+
+    Attributes:
+        total: links judged.
+        true: links whose two ends agree in position and heading.
+        false: the others.
+        false_indices: index (in the order given) of every false link.
+        position_error: per link, distance between the true positions of its two ends (m).
+        heading_error: per link, claimed minus true relative heading, wrapped (rad).
+
+    """
 
     total: int
     true: int
     false: int
+    false_indices: tuple[int, ...] = ()
+    position_error: FloatArray | None = None
+    heading_error: FloatArray | None = None
 
     @property
     def precision(self) -> float | None:
@@ -85,12 +115,257 @@ class LoopClosureScore:
 
 
 def score_loop_closures(
-    robot_positions: FloatArray,
-    target_positions: FloatArray,
+    robot_poses: FloatArray,
+    target_poses: FloatArray,
+    relative_rad: FloatArray | None = None,
     distance: float = TRUE_LOOP_CLOSURE_DISTANCE,
+    heading: float = TRUE_LOOP_CLOSURE_HEADING,
 ) -> LoopClosureScore:
-    """Count loop closures whose two ends (true positions) are within ``distance``."""
-    a = np.asarray(robot_positions, dtype=np.float64)[:, :2]
-    b = np.asarray(target_positions, dtype=np.float64)[:, :2]
-    good = int(np.count_nonzero(np.hypot(*(a - b).T) <= distance)) if a.size else 0
-    return LoopClosureScore(total=int(a.shape[0]), true=good, false=int(a.shape[0]) - good)
+    """Judge loop closures by the true poses of their two ends.
+
+    A link claims that the robot (true pose ``robot_poses[k]``) is at the place of the target
+    vertex (true pose at its creation ``target_poses[k]``), with heading ``theta_target +
+    relative_rad[k]``. It is true when the positions are within ``distance`` and, when
+    ``relative_rad`` is given (poses then need a heading column), the claimed heading is within
+    ``heading`` of the robot's true heading.
+    """
+    a = np.asarray(robot_poses, dtype=np.float64)
+    b = np.asarray(target_poses, dtype=np.float64)
+    n = int(a.shape[0]) if a.ndim == 2 else 0
+    if n == 0:
+        return LoopClosureScore(0, 0, 0, (), np.zeros(0), np.zeros(0))
+    position_error = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1])
+    good = position_error <= distance
+    heading_error = np.zeros(n)
+    if relative_rad is not None:
+        if a.shape[1] < 3 or b.shape[1] < 3:
+            raise ValueError("judging link headings needs (x, y, theta) poses")
+        claimed = b[:, 2] + np.asarray(relative_rad, dtype=np.float64)
+        heading_error = (claimed - a[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        good &= np.abs(heading_error) <= heading
+    false = tuple(int(k) for k in np.flatnonzero(~good))
+    true = n - len(false)
+    return LoopClosureScore(n, true, len(false), false, position_error, heading_error)
+
+
+def dead_reckoning(times: FloatArray, translation: FloatArray, rotation: FloatArray) -> FloatArray:
+    """Integrate odometry alone (rotate, then translate along the new heading) from the origin.
+
+    Returns ``(N, 3)`` poses after each step, the way the cognitive map integrates odometry.
+    """
+    del times  # the poses follow the steps; times only label them
+    theta = np.cumsum(np.asarray(rotation, dtype=np.float64))
+    step = np.asarray(translation, dtype=np.float64)
+    poses = np.empty((step.shape[0], 3))
+    poses[:, 0] = np.cumsum(step * np.cos(theta))
+    poses[:, 1] = np.cumsum(step * np.sin(theta))
+    poses[:, 2] = (theta + np.pi) % (2 * np.pi) - np.pi
+    return poses
+
+
+@dataclass(frozen=True, slots=True)
+class LayoutFidelity:
+    """How well a map's edges represent the true path (both ways), at ``radius``.
+
+    Attributes:
+        completeness: fraction of the true path's length within ``radius`` of the map (an edge,
+            or a vertex without edges).
+        correctness: fraction of the map's edge length within ``radius`` of the true path
+            (``nan`` for a map without edge length).
+        radius: the radius (m).
+        edges_per_vertex: live edges / live vertices.
+        path_length: length of the true path (m).
+        edge_length: total length of the map's edges after alignment (m).
+
+    """
+
+    completeness: float
+    correctness: float
+    radius: float
+    edges_per_vertex: float
+    path_length: float
+    edge_length: float
+
+
+def _sample_polyline_pieces(
+    start: FloatArray, end: FloatArray, spacing: float
+) -> tuple[FloatArray, FloatArray]:
+    """Split segments into equal pieces no longer than ``spacing``; return midpoints, lengths."""
+    length = np.hypot(*(end - start).T)
+    pieces = np.maximum(np.ceil(length / spacing).astype(np.int64), 1)
+    owner = np.repeat(np.arange(start.shape[0]), pieces)
+    first = np.cumsum(pieces) - pieces
+    index = np.arange(owner.size) - first[owner]
+    frac = (index + 0.5) / pieces[owner]
+    mid = start[owner] + (end[owner] - start[owner]) * frac[:, None]
+    return mid, (length / pieces)[owner]
+
+
+def _within_radius_of_segments(
+    points: FloatArray, start: FloatArray, end: FloatArray, radius: float
+) -> NDArray[np.bool_]:
+    """Whether each point lies within ``radius`` of at least one segment (exact test).
+
+    The segments are sampled every ``s = radius / 4``; a point whose nearest sample is within
+    ``radius`` is covered, one farther than ``sqrt(radius^2 + (s/2)^2)`` from every sample is
+    not (every point of a segment lies within ``s/2`` of a sample, along it). Only the points in
+    between are tested against the segments themselves.
+    """
+    covered = np.zeros(points.shape[0], dtype=bool)
+    if start.shape[0] == 0 or points.shape[0] == 0:
+        return covered
+    spacing = max(radius, 1e-3) / 4.0
+    length = np.hypot(*(end - start).T)
+    counts = np.maximum(np.ceil(length / spacing).astype(np.int64), 1)
+    owner = np.repeat(np.arange(start.shape[0]), counts + 1)
+    first = np.cumsum(counts + 1) - (counts + 1)
+    frac = (np.arange(owner.size) - first[owner]) / counts[owner]
+    samples = start[owner] + (end[owner] - start[owner]) * frac[:, None]
+    tree = cKDTree(samples)
+    distance, _ = tree.query(points, k=1)
+    covered = distance <= radius
+    band = np.flatnonzero(~covered & (distance <= math.hypot(radius, spacing / 2.0)))
+    if band.size == 0:
+        return covered
+    reach = math.hypot(radius, spacing / 2.0)
+    lists = tree.query_ball_point(points[band], reach)
+    sizes = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(lists))
+    point = np.repeat(band, sizes)
+    segment = owner[np.fromiter((i for x in lists for i in x), dtype=np.int64, count=sizes.sum())]
+    a, b = start[segment], end[segment]
+    ab = b - a
+    denom = np.einsum("ij,ij->i", ab, ab)
+    t = np.clip(
+        np.einsum("ij,ij->i", points[point] - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1
+    )
+    gap = points[point] - (a + ab * t[:, None])
+    close = np.einsum("ij,ij->i", gap, gap) <= radius * radius
+    covered[point[close]] = True
+    return covered
+
+
+def layout_fidelity(
+    vertex_positions: FloatArray,
+    vertex_truth: FloatArray,
+    edge_from: NDArray[np.int64],
+    edge_to: NDArray[np.int64],
+    true_path: FloatArray,
+    radius: float = LAYOUT_RADIUS,
+) -> LayoutFidelity:
+    """Completeness and correctness of a map's layout against the true path.
+
+    Args:
+        vertex_positions: ``(N, 2+)`` map positions of the live vertices.
+        vertex_truth: ``(N, 2+)`` true positions of the same vertices at their creation times;
+            the map is rigidly aligned to them first (as for the ATE).
+        edge_from: ``(E,)`` index (into the vertex arrays) of each edge's first vertex.
+        edge_to: ``(E,)`` index of each edge's second vertex.
+        true_path: ``(M, 2+)`` the dense ground-truth path in time order (the bag's overhead
+            poses), not the vertex poses.
+        radius: the tolerance (m).
+
+    Both measures are length-weighted: the path and the edges are cut into pieces of at most
+    ``radius / 8`` and each piece counts with its length, judged at its midpoint against the
+    exact distance to the other side's segments.
+
+    """
+    if radius <= 0 or not math.isfinite(radius):
+        raise ValueError(f"layout radius must be a positive number of metres, got {radius!r}")
+    pos = np.asarray(vertex_positions, dtype=np.float64)[:, :2]
+    truth = np.asarray(vertex_truth, dtype=np.float64)[:, :2]
+    path = np.asarray(true_path, dtype=np.float64)[:, :2]
+    e_from = np.asarray(edge_from, dtype=np.int64)
+    e_to = np.asarray(edge_to, dtype=np.int64)
+    n = pos.shape[0]
+    epv = e_from.shape[0] / n if n else float("nan")
+    if n == 0 or path.shape[0] < 2:
+        return LayoutFidelity(float("nan"), float("nan"), radius, epv, 0.0, 0.0)
+    aligned = align_rigid_2d(pos, truth).apply(pos)
+    spacing = radius / 8.0
+    # the map's segments: every edge, plus every vertex as a point (covers an edge-less map)
+    seg_a = np.concatenate([aligned[e_from], aligned])
+    seg_b = np.concatenate([aligned[e_to], aligned])
+    path_mid, path_len = _sample_polyline_pieces(path[:-1], path[1:], spacing)
+    moving = path_len > 0
+    path_mid, path_len = path_mid[moving], path_len[moving]
+    total_path = float(path_len.sum())
+    covered = _within_radius_of_segments(path_mid, seg_a, seg_b, radius)
+    completeness = float(path_len[covered].sum() / total_path) if total_path > 0 else float("nan")
+    edge_mid, edge_len = _sample_polyline_pieces(aligned[e_from], aligned[e_to], spacing)
+    total_edges = float(edge_len.sum()) if e_from.size else 0.0
+    if total_edges > 0:
+        on_path = _within_radius_of_segments(edge_mid, path[:-1], path[1:], radius)
+        correctness = float(edge_len[on_path].sum() / total_edges)
+    else:
+        correctness = float("nan")
+    return LayoutFidelity(completeness, correctness, radius, epv, total_path, total_edges)
+
+
+@dataclass(frozen=True, slots=True)
+class SizeChange:
+    """How a map's vertex count changed over a stretch of data, with exploration set apart.
+
+    Attributes:
+        start_vertices: live vertices at the start.
+        end_vertices: live vertices at the end.
+        exploration_vertices: vertices alive at the end that were made during the stretch on
+            ground first explored during it (the true path had not passed within the radius
+            before the start).
+        change: (end - start) / start.
+        change_without_exploration: (end - exploration - start) / start: growth or shrinking
+            on ground that was already known -- what a map that "does not grow unless the
+            unknown environment is explored" keeps at zero.
+
+    """
+
+    start_vertices: int
+    end_vertices: int
+    exploration_vertices: int
+    change: float
+    change_without_exploration: float
+
+
+def size_change(
+    size_times: FloatArray,
+    size_vertices: NDArray[np.int64],
+    vertex_time: FloatArray,
+    vertex_truth: FloatArray,
+    path_times: FloatArray,
+    true_path: FloatArray,
+    start: float,
+    end: float,
+    radius: float = LAYOUT_RADIUS,
+) -> SizeChange:
+    """Size change of a map between data times ``start`` and ``end`` (see :class:`SizeChange`).
+
+    Args:
+        size_times: the map's size history: times ...
+        size_vertices: ... and live vertices after each.
+        vertex_time: creation times of the vertices alive at ``end``.
+        vertex_truth: ``(N, 2+)`` their true positions at creation.
+        path_times: times of the dense ground-truth path ...
+        true_path: ... and its ``(M, 2+)`` poses.
+        start: start of the stretch (s).
+        end: end of the stretch (s).
+        radius: how close the path must have passed before ``start`` for ground to be known.
+
+    """
+
+    def size_at(t: float) -> int:
+        k = int(np.searchsorted(size_times, t, side="right")) - 1
+        return int(size_vertices[k]) if k >= 0 else 0
+
+    v0, v1 = size_at(start), size_at(end)
+    made = (np.asarray(vertex_time) > start) & (np.asarray(vertex_time) <= end)
+    known = np.asarray(true_path, dtype=np.float64)[np.asarray(path_times) <= start, :2]
+    explored = 0
+    if made.any():
+        points = np.asarray(vertex_truth, dtype=np.float64)[made, :2]
+        if known.shape[0] == 0:
+            explored = int(points.shape[0])
+        else:
+            gap, _ = cKDTree(known).query(points)
+            explored = int(np.count_nonzero(gap > radius))
+    if v0 == 0:
+        return SizeChange(v0, v1, explored, float("nan"), float("nan"))
+    return SizeChange(v0, v1, explored, (v1 - v0) / v0, (v1 - explored - v0) / v0)

@@ -8,8 +8,11 @@ import pytest
 from cogmap_core.evaluation import (
     absolute_trajectory_error,
     align_rigid_2d,
+    dead_reckoning,
     interpolate_poses,
+    layout_fidelity,
     score_loop_closures,
+    size_change,
 )
 
 
@@ -48,3 +51,93 @@ def test_loop_closure_precision():
     assert (score.total, score.true, score.false) == (3, 2, 1)
     assert score.precision == pytest.approx(2 / 3)
     assert score_loop_closures(np.zeros((0, 2)), np.zeros((0, 2))).precision is None
+
+
+def test_loop_closures_are_judged_by_heading_too():
+    robot = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 1.0]])
+    target = np.array([[0.02, 0.0, 0.0], [1.0, 0.05, 0.5], [2.0, 0.0, 0.0]])
+    relative = np.array([0.0, 0.0, 1.0])  # the second link misses the robot's heading by 0.5
+    score = score_loop_closures(robot, target, relative)
+    assert (score.total, score.true, score.false) == (3, 2, 1)
+    assert score.false_indices == (1,)
+    np.testing.assert_allclose(score.heading_error, [0.0, 0.5, 0.0], atol=1e-12)
+    np.testing.assert_allclose(score.position_error, [0.02, 0.05, 0.0], atol=1e-12)
+    assert score_loop_closures(robot, target, relative, heading=0.6).false == 0
+    with pytest.raises(ValueError, match="heading"):
+        score_loop_closures(robot[:, :2], target[:, :2], relative)
+
+
+def test_dead_reckoning_turns_then_drives():
+    poses = dead_reckoning(np.arange(4.0), np.array([1.0, 1.0, 1.0, 0.0]), np.array([0, 0, 0, 0.0]))
+    np.testing.assert_allclose(poses[:, :2], [[1, 0], [2, 0], [3, 0], [3, 0]], atol=1e-12)
+    square = dead_reckoning(np.arange(4.0), np.ones(4), np.array([0, 1, 1, 1]) * np.pi / 2)
+    np.testing.assert_allclose(square[:, :2], [[1, 0], [1, 1], [0, 1], [0, 0]], atol=1e-12)
+
+
+def straight_path(length: float) -> np.ndarray:
+    return np.c_[np.linspace(0.0, length, 201), np.zeros(201)]
+
+
+def test_layout_fidelity_both_ways_with_exact_lengths():
+    vertices = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [0.5, 0.5]])
+    on_path = layout_fidelity(vertices[:3], vertices[:3], [0, 1], [1, 2], straight_path(1.0))
+    assert (on_path.completeness, on_path.correctness) == (1.0, 1.0)
+    assert on_path.edges_per_vertex == pytest.approx(2 / 3)
+    assert on_path.edge_length == pytest.approx(1.0) and on_path.path_length == pytest.approx(1.0)
+    # a spur across a wall: only its first 8 cm lie within 8 cm of the path
+    spur = layout_fidelity(vertices, vertices, [0, 1, 1], [1, 2, 3], straight_path(1.0))
+    assert spur.completeness == 1.0
+    assert spur.correctness == pytest.approx(1.08 / 1.5, abs=1e-9)
+    # the true path goes on for another metre the map does not have
+    half = layout_fidelity(vertices[:3], vertices[:3], [0, 1], [1, 2], straight_path(2.0))
+    assert half.completeness == pytest.approx(1.08 / 2.0, abs=1e-9)
+    assert half.correctness == 1.0
+    tighter = layout_fidelity(vertices, vertices, [0, 1, 1], [1, 2, 3], straight_path(1.0), 0.02)
+    assert tighter.correctness == pytest.approx(1.02 / 1.5, abs=1e-9)
+
+
+def test_layout_fidelity_aligns_the_map_first():
+    vertices = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.0]])
+    theta = 0.7
+    c, s = np.cos(theta), np.sin(theta)
+    moved = vertices @ np.array([[c, s], [-s, c]]) + [3.0, -1.0]  # the map's own frame
+    result = layout_fidelity(moved, vertices, [0, 1], [1, 2], straight_path(1.0))
+    assert result.completeness == pytest.approx(1.0) and result.correctness == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="radius"):
+        layout_fidelity(moved, vertices, [0, 1], [1, 2], straight_path(1.0), radius=0.0)
+
+
+def test_size_change_sets_exploration_apart():
+    # sizes: 10 vertices at t=5, 12 at t=15 (two new ones: one on known ground, one beyond)
+    size_times = np.array([0.0, 5.0, 12.0, 14.0])
+    size_vertices = np.array([1, 10, 11, 12])
+    path_times = np.linspace(0.0, 20.0, 201)
+    path = np.c_[np.where(path_times <= 10.0, path_times * 0.1, 1.0 + (path_times - 10.0) * 0.1)]
+    path = np.c_[path, np.zeros_like(path)]
+    vertex_time = np.array([0.0, 12.0, 14.0])  # alive at the end: an old one and the two new
+    vertex_truth = np.array([[0.0, 0.0], [0.5, 0.02], [1.8, 0.0]])  # 0.5 m: known by t=10
+    change = size_change(
+        size_times, size_vertices, vertex_time, vertex_truth, path_times, path, 10.0, 15.0
+    )
+    assert (change.start_vertices, change.end_vertices, change.exploration_vertices) == (10, 12, 1)
+    assert change.change == pytest.approx(0.2)
+    assert change.change_without_exploration == pytest.approx(0.1)
+
+
+def test_radius_test_agrees_with_brute_force():
+    from cogmap_core.evaluation import _within_radius_of_segments
+
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        a = rng.uniform(0, 1, (30, 2))
+        b = a + rng.normal(0, 0.2, (30, 2))
+        points = rng.uniform(-0.2, 1.2, (400, 2))
+        radius = rng.uniform(0.01, 0.15)
+        ab = b - a
+        nearest = np.full(len(points), np.inf)
+        for k in range(len(a)):
+            t = np.clip((points - a[k]) @ ab[k] / (ab[k] @ ab[k]), 0, 1)
+            nearest = np.minimum(nearest, np.hypot(*(points - a[k] - t[:, None] * ab[k]).T))
+        np.testing.assert_array_equal(
+            _within_radius_of_segments(points, a, b, radius), nearest <= radius
+        )
