@@ -20,6 +20,12 @@ _RANGES: dict[str, tuple[float, bool, float, str]] = {
     "integration_radius": (0.0, True, 1e9, "max distance of a revisit to merge it (m)"),
     "integration_max_residual": (0.0, True, 1e9, "max loop-edge residual to merge a revisit"),
     "integration_min_age": (0.0, True, 1e9, "min age of the vertex a revisit merges into (s)"),
+    "gate_position": (0.0, True, 1e9, "relocalisation test: position tolerance (m)"),
+    "gate_heading": (0.0, True, 1e9, "relocalisation test: heading tolerance (rad)"),
+    "gate_drift_position": (0.0, True, 1e9, "relocalisation test: position drift per metre"),
+    "gate_drift_heading": (0.0, True, 1e9, "relocalisation test: heading drift per metre (rad/m)"),
+    "gate_consensus": (0.0, True, 1e9, "relocalisation test: agreeing refusals that win (0: off)"),
+    "edge_noise_model": (0.0, True, 1.0, "1: weigh edges by expected precision, 0: identity"),
 }
 
 
@@ -57,10 +63,16 @@ class MapParams:
     t_interval: float = 2.0
     t_total: float = 100.0
     huber_scale: float = 0.1
-    short_edge_threshold: float = 0.05
-    integration_radius: float = 0.3
+    short_edge_threshold: float = 0.03
+    integration_radius: float = 0.1
     integration_max_residual: float = 0.1
     integration_min_age: float = 10.0
+    gate_position: float = 0.1
+    gate_heading: float = 0.17
+    gate_drift_position: float = 0.05
+    gate_drift_heading: float = 0.02
+    gate_consensus: float = 8.0
+    edge_noise_model: float = 1.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,12 +18,21 @@ from numpy.typing import NDArray
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode, MapSet
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import (
+    LAYOUT_RADIUS,
+    TRUE_LOOP_CLOSURE_DISTANCE,
+    TRUE_LOOP_CLOSURE_HEADING,
+    LayoutFidelity,
     LoopClosureScore,
+    SizeChange,
     absolute_trajectory_error,
+    dead_reckoning,
     interpolate_poses,
+    layout_fidelity,
     score_loop_closures,
+    size_change,
 )
-from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent
+from cogmap_core.event_file import EventRecording
+from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry
 from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 
@@ -65,6 +75,167 @@ class EventLog:
     def has_ground_truth(self) -> bool:
         """True when every frame so far came with ground truth."""
         return bool(self.ground_truth) and len(self.ground_truth) == len(self.frame_end)
+
+    # ------------------------------------------------------------------ evaluation
+    def truth_at(self, times: FloatArray) -> FloatArray | None:
+        """Ground-truth poses at data ``times`` (interpolated; None without ground truth)."""
+        if not self.has_ground_truth():
+            return None
+        return interpolate_poses(
+            np.asarray(self.frame_time), np.asarray(self.ground_truth), np.asarray(times)
+        )
+
+    def vertex_ground_truth(self, cmap: CognitiveMap) -> FloatArray | None:
+        """Ground-truth pose at each live vertex's creation time (None without ground truth)."""
+        return self.truth_at(cmap.snapshot().vertex_time)
+
+    def map_ate(self, cmap: CognitiveMap) -> float | None:
+        """RMSE of a map's vertex positions against ground truth after rigid alignment (m)."""
+        truth = self.vertex_ground_truth(cmap)
+        if truth is None or cmap.num_vertices == 0:
+            return None
+        return absolute_trajectory_error(cmap.snapshot().poses, truth)
+
+    def dead_reckoning(self) -> FloatArray:
+        """``(F, 3)`` pose after each frame from the odometry events alone (from the origin)."""
+        is_odometry = np.fromiter((type(e) is Odometry for e in self.events), dtype=bool)
+        odometry = [e for e in self.events if type(e) is Odometry]
+        ends = np.asarray(self.frame_end, dtype=np.int64)
+        out = np.zeros((ends.size, 3))
+        if not odometry:
+            return out
+        poses = dead_reckoning(
+            np.array([e.time for e in odometry]),
+            np.array([e.translation for e in odometry]),
+            np.array([e.rotation for e in odometry]),
+        )
+        # the pose after the last odometry event of each frame
+        count = np.cumsum(is_odometry)
+        index = np.where(ends > 0, count[np.maximum(ends - 1, 0)] - 1, -1)
+        out[index >= 0] = poses[index[index >= 0]]
+        return out
+
+    def dead_reckoning_ate(self) -> float | None:
+        """ATE (m) of the odometry alone at every frame: the baseline a map must beat."""
+        if not self.has_ground_truth() or not self.frame_end:
+            return None
+        return absolute_trajectory_error(self.dead_reckoning(), np.asarray(self.ground_truth))
+
+    def layout_fidelity(
+        self, cmap: CognitiveMap, radius: float = LAYOUT_RADIUS
+    ) -> LayoutFidelity | None:
+        """Completeness and correctness of a map against the dense true path (per frame)."""
+        if not self.has_ground_truth():
+            return None
+        snap = cmap.snapshot()
+        truth = self.truth_at(snap.vertex_time)
+        assert truth is not None
+        index = np.searchsorted(snap.vertex_ids, np.r_[snap.edge_from, snap.edge_to])
+        m = snap.edge_from.shape[0]
+        return layout_fidelity(
+            snap.poses, truth, index[:m], index[m:], np.asarray(self.ground_truth), radius
+        )
+
+    def size_change(
+        self, cmap: CognitiveMap, start: float, end: float, radius: float = LAYOUT_RADIUS
+    ) -> SizeChange | None:
+        """A map's size change between two data times, exploration set apart (needs truth).
+
+        ``cmap`` must be the map as it was at ``end`` (or later, when no vertex made after
+        ``end`` is alive: then the vertices alive at the end of the data stand for those at
+        ``end``).
+        """
+        if not self.has_ground_truth():
+            return None
+        times, vertices, _ = cmap.size_history()
+        snap = cmap.snapshot()
+        keep = snap.vertex_time <= end
+        truth = self.truth_at(snap.vertex_time[keep])
+        assert truth is not None
+        return size_change(
+            times,
+            vertices,
+            snap.vertex_time[keep],
+            truth,
+            np.asarray(self.frame_time),
+            np.asarray(self.ground_truth),
+            start,
+            end,
+            radius,
+        )
+
+    def link_table(self) -> list[tuple[float, int, float]]:
+        """Every loop closure the front end emitted: (time, target, relative_rad)."""
+        return [
+            (event.time, event.target, event.relative_rad)
+            for event in self.events
+            if type(event) is LinkToVertex
+        ]
+
+    def loop_closure_score(
+        self,
+        distance: float = TRUE_LOOP_CLOSURE_DISTANCE,
+        heading: float = TRUE_LOOP_CLOSURE_HEADING,
+    ) -> LoopClosureScore | None:
+        """Front-end loop closures judged by ground truth, position and heading.
+
+        A link is true when the robot's true position is within ``distance`` of the target
+        vertex's true position (at its creation) and the heading the link claims (target heading
+        plus the link's relative angle) is within ``heading`` of the robot's true heading.
+        ``false_indices`` index :meth:`link_table`.
+        """
+        if not self.has_ground_truth():
+            return None
+        vertex_time: dict[int, float] = {}
+        robot, target_time, relative = [], [], []
+        link_index = 0
+        for event in self.events:
+            if type(event) is CreateVertex:
+                vertex_time[event.vertex] = event.time
+            elif type(event) is LinkToVertex:
+                robot_truth = self.link_robot_truth[link_index]
+                link_index += 1
+                if robot_truth is None or event.target not in vertex_time:
+                    continue
+                robot.append(robot_truth)
+                target_time.append(vertex_time[event.target])
+                relative.append(event.relative_rad)
+        if not robot:
+            return score_loop_closures(np.zeros((0, 3)), np.zeros((0, 3)))
+        target = self.truth_at(np.asarray(target_time))
+        return score_loop_closures(
+            np.asarray(robot), target, np.asarray(relative), distance, heading
+        )
+
+    def recording(self, source: str = "", frontend: dict[str, Any] | None = None) -> EventRecording:
+        """The log as an :class:`~cogmap_core.event_file.EventRecording` (to save or replay)."""
+        return EventRecording(
+            events=list(self.events),
+            frame_end=np.asarray(self.frame_end, dtype=np.int64),
+            frame_time=np.asarray(self.frame_time, dtype=np.float64),
+            ground_truth=np.asarray(self.ground_truth) if self.has_ground_truth() else None,
+            source=source,
+            frontend=dict(frontend or {}),
+        )
+
+    @classmethod
+    def from_recording(cls, recording: EventRecording) -> EventLog:
+        """A log holding a recording's events (link truths rebuilt from the frames)."""
+        log = cls(
+            events=list(recording.events),
+            frame_end=recording.frame_end.tolist(),
+            frame_time=recording.frame_time.tolist(),
+        )
+        if recording.ground_truth is not None:
+            truth = [tuple(row) for row in recording.ground_truth.tolist()]
+            log.ground_truth = truth  # type: ignore[assignment]
+            frame = 0
+            for k, event in enumerate(log.events):
+                while log.frame_end[frame] <= k:
+                    frame += 1
+                if isinstance(event, LinkToVertex):
+                    log.link_robot_truth.append(truth[frame])  # type: ignore[arg-type]
+        return log
 
 
 class SlamSession:
@@ -159,44 +330,21 @@ class SlamSession:
     # ------------------------------------------------------------------ evaluation
     def vertex_ground_truth(self, cmap: CognitiveMap) -> FloatArray | None:
         """Ground-truth pose at each live vertex's creation time (None without ground truth)."""
-        if not self.log.has_ground_truth():
-            return None
-        snap = cmap.snapshot()
-        return interpolate_poses(
-            np.asarray(self.log.frame_time), np.asarray(self.log.ground_truth), snap.vertex_time
-        )
+        return self.log.vertex_ground_truth(cmap)
 
     def ate(self, cmap: CognitiveMap) -> float | None:
         """RMSE of vertex positions against ground truth after rigid alignment (m)."""
-        truth = self.vertex_ground_truth(cmap)
-        if truth is None or cmap.num_vertices == 0:
-            return None
-        return absolute_trajectory_error(cmap.snapshot().poses, truth)
+        return self.log.map_ate(cmap)
+
+    def layout_fidelity(
+        self, cmap: CognitiveMap, radius: float = LAYOUT_RADIUS
+    ) -> LayoutFidelity | None:
+        """Completeness and correctness of a map against the true path (None without truth)."""
+        return self.log.layout_fidelity(cmap, radius)
 
     def loop_closure_score(self) -> LoopClosureScore | None:
-        """Front-end loop closures judged by ground truth (robot vs. target vertex position)."""
-        if not self.log.has_ground_truth():
-            return None
-        times = np.asarray(self.log.frame_time)
-        truth = np.asarray(self.log.ground_truth)
-        vertex_time: dict[int, float] = {}
-        robot, target = [], []
-        link_index = 0
-        for event in self.log.events:
-            if isinstance(event, CreateVertex):
-                vertex_time[event.vertex] = event.time
-            elif isinstance(event, LinkToVertex):
-                robot_truth = self.log.link_robot_truth[link_index]
-                link_index += 1
-                if robot_truth is None or event.target not in vertex_time:
-                    continue
-                robot.append(robot_truth)
-                target.append(
-                    interpolate_poses(times, truth, np.array([vertex_time[event.target]]))[0]
-                )
-        if not robot:
-            return score_loop_closures(np.zeros((0, 2)), np.zeros((0, 2)))
-        return score_loop_closures(np.asarray(robot), np.asarray(target))
+        """Front-end loop closures judged by ground truth (position and heading)."""
+        return self.log.loop_closure_score()
 
 
 def optimisation_summary(cmap: CognitiveMap) -> dict[str, float | int]:

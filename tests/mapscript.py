@@ -48,6 +48,17 @@ class Script:
     def set_current(self, vid: int) -> None:
         self.events.append(SetCurrentVertex(self.t, vid, self.rel_to(vid)))
 
+    def relocalise(self, vid: int, heading_error: float = 0.0) -> None:
+        """What the front end emits when it recognises vertex ``vid``: link, then set current."""
+        rel = self.rel_to(vid) + heading_error
+        self.events.append(LinkToVertex(self.t, vid, rel))
+        self.events.append(SetCurrentVertex(self.t, vid, rel))
+
+    def drive(self, d: float, steps: int, rot: float = 0.0) -> None:
+        """Drive ``d`` metres in ``steps`` odometry events (turning ``rot`` in total first)."""
+        for k in range(steps):
+            self.move(d / steps, rot if k == 0 else 0.0)
+
     def wait(self, seconds: float) -> None:
         """Let data time pass (odometry events without motion)."""
         steps = int(round(seconds / self.dt))

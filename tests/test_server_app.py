@@ -43,7 +43,7 @@ CHANGES: tuple[tuple[str, float], ...] = (
     ("delta", 8.0),
     ("t_interval", 0.1),
     ("t_total", 1.0),
-    ("huber_scale", 2.0),
+    ("huber_scale", 0.02),
     ("short_edge_threshold", 0.3),
 )
 
@@ -130,7 +130,14 @@ def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: S
 
 @pytest.mark.parametrize(
     ("name", "value"),
-    CHANGES + (("integration_radius", 0.05), ("integration_max_residual", 0.01)),
+    CHANGES
+    + (
+        ("integration_radius", 0.05),
+        ("integration_max_residual", 0.01),
+        ("integration_min_age", 1.0),
+        ("gate_position", 0.01),
+        ("edge_noise_model", 0.0),
+    ),
 )
 def test_maps_ignore_the_parameters_they_do_not_use(
     reference: SlamSession, name: str, value: float

@@ -49,8 +49,20 @@ REBUILD_CHUNK = 1000
 MAX_LAG_S = 1.0
 _TIME_TOLERANCE = 1e-6
 
-_CLUSTERING_AND_OPTIMISATION = frozenset({"t_interval", "t_total", "huber_scale"})
-_INTEGRATION = frozenset({"integration_radius", "integration_max_residual"})
+_CLUSTERING_AND_OPTIMISATION = frozenset(
+    {
+        "t_interval",
+        "t_total",
+        "huber_scale",
+        "edge_noise_model",
+        "gate_position",
+        "gate_heading",
+        "gate_drift_position",
+        "gate_drift_heading",
+        "gate_consensus",
+    }
+)
+_INTEGRATION = frozenset({"integration_radius", "integration_max_residual", "integration_min_age"})
 #: The map parameters each map depends on. A change of other parameters leaves a map exactly as
 #: it is, so its rebuild is skipped (the neighborhood field and short-edge removal belong to the
 #: compact map only, scene integration to the two non-standard maps). The tests rebuild every map

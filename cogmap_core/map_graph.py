@@ -1,0 +1,373 @@
+"""The graph store of the cognitive map: vertices, edges, aliases and adjacency.
+
+Vertices are indexed by the front end's experience ids (``0, 1, 2, ...``); edges by an edge
+index in creation order. Both live in flat numpy arrays grown by doubling, so 10^5 vertices stay
+cheap; adjacency is one small dict per vertex (neighbour -> edge index), so the edges of a vertex
+are found without scanning the map. Between two vertices there is at most one live edge.
+
+A vertex the map declined or removed stays addressable as an *alias*: the live vertex that
+absorbed it plus its relative pose in that vertex's frame, so later links to it land exactly where
+the evidence says. This module knows nothing of the paper's mechanisms; they live in
+:mod:`~cogmap_core.neighborhood_fields`, :mod:`~cogmap_core.scene_integration`,
+:mod:`~cogmap_core.short_edges` and :mod:`~cogmap_core.relocalisation`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cogmap_core.edge_noise import edge_information
+from cogmap_core.errors import EventError
+from cogmap_core.geometry import compose, compose_scalar, inverse_scalar, relative_to_polar
+from cogmap_core.posegraph import PoseGraph
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Pose = tuple[float, float, float]
+TWO_PI = 2.0 * math.pi
+
+
+def wrap(angle: float) -> float:
+    """Wrap an angle to ``[-pi, pi)``."""
+    return (angle + math.pi) % TWO_PI - math.pi
+
+
+class EdgeKind(IntEnum):
+    """Kinds of edges."""
+
+    SEQUENTIAL = 0
+    LOOP_CLOSURE = 1
+
+
+@dataclass(frozen=True, slots=True)
+class MapSnapshot:
+    """A copy of the live part of the map (for viewers, exporters and reports).
+
+    Edge fields follow OpenRatSLAM: ``d``, ``heading_rad`` and ``facing_rad`` give the relative
+    pose of ``edge_to`` in the frame of ``edge_from``; ``edge_rel`` is the same as (dx, dy, dtheta).
+    ``edge_from``/``edge_to`` are vertex ids.
+    """
+
+    vertex_ids: IntArray
+    poses: FloatArray
+    vertex_time: FloatArray
+    vertex_view: IntArray
+    edge_from: IntArray
+    edge_to: IntArray
+    edge_rel: FloatArray
+    edge_time: FloatArray
+    edge_kind: NDArray[np.int8]
+    edge_cluster: IntArray
+    current_vertex: int
+    current_pose: FloatArray
+
+    @property
+    def edge_d(self) -> FloatArray:
+        """Edge lengths ``d`` (m)."""
+        return relative_to_polar(self.edge_rel)[0]
+
+    @property
+    def edge_heading_rad(self) -> FloatArray:
+        """Direction of travel relative to the source vertex's heading."""
+        return relative_to_polar(self.edge_rel)[1]
+
+    @property
+    def edge_facing_rad(self) -> FloatArray:
+        """Heading change from source to target."""
+        return relative_to_polar(self.edge_rel)[2]
+
+
+def _grow(array: NDArray, size: int, fill: float = 0) -> NDArray:
+    out = np.full((size,) + array.shape[1:], fill, dtype=array.dtype)
+    out[: array.shape[0]] = array
+    return out
+
+
+class MapGraph:
+    """Vertices, edges, aliases and adjacency of one cognitive map."""
+
+    def __init__(self) -> None:
+        """An empty graph."""
+        cap = 256
+        self.pose = np.zeros((cap, 3))
+        self.vertex_time = np.zeros(cap)
+        self.view = np.zeros(cap, dtype=np.int64)
+        self.alive = np.zeros(cap, dtype=bool)
+        self.alias = np.full(cap, -1, dtype=np.int64)
+        self.alias_offset = np.zeros((cap, 3))
+        self.num_ids = 0
+        self.edge_from = np.zeros(cap, dtype=np.int64)
+        self.edge_to = np.zeros(cap, dtype=np.int64)
+        self.edge_rel = np.zeros((cap, 3))
+        self.edge_time = np.zeros(cap)
+        self.edge_kind = np.zeros(cap, dtype=np.int8)
+        self.edge_cluster = np.full(cap, -1, dtype=np.int64)
+        self.edge_alive = np.zeros(cap, dtype=bool)
+        self.num_edges_total = 0
+        self.adjacency: list[dict[int, int]] = []
+        # absorbed[v]: ids whose alias is v (besides v itself), to re-point them on a merge
+        self._absorbed: list[list[int]] = []
+        self.num_vertices = 0
+        self.num_edges = 0
+        self.num_loop_edges = 0
+
+    # ------------------------------------------------------------------ vertices
+    def new_id(self, vertex_id: int, time: float, view: int) -> None:
+        """Register the next experience id (alive or not is decided by the caller)."""
+        if vertex_id != self.num_ids:
+            raise EventError(
+                f"CreateVertex({vertex_id}) at {time:.3f} s: the next vertex id must be "
+                f"{self.num_ids} (ids are 0, 1, 2, ... in creation order)"
+            )
+        n = vertex_id + 1
+        cap = self.pose.shape[0]
+        if n > cap:
+            new = max(n, 2 * cap)
+            self.pose = _grow(self.pose, new)
+            self.vertex_time = _grow(self.vertex_time, new)
+            self.view = _grow(self.view, new)
+            self.alive = _grow(self.alive, new)
+            self.alias = _grow(self.alias, new, fill=-1)
+            self.alias_offset = _grow(self.alias_offset, new)
+        self.num_ids = n
+        self.vertex_time[vertex_id] = time
+        self.view[vertex_id] = view
+        self.adjacency.append({})
+        self._absorbed.append([])
+
+    def add_vertex(self, vertex_id: int, pose: Pose | list[float]) -> None:
+        """Make a registered id a live vertex at ``pose``."""
+        self.pose[vertex_id] = (pose[0], pose[1], wrap(pose[2]))
+        self.alive[vertex_id] = True
+        self.alias[vertex_id] = vertex_id
+        self.alias_offset[vertex_id] = 0.0
+        self.num_vertices += 1
+
+    def add_alias(self, vertex_id: int, target: int, offset: Pose | list[float]) -> None:
+        """Make a registered id an alias of the live vertex ``target`` (pose ``offset`` in it)."""
+        self.alias[vertex_id] = target
+        self.alias_offset[vertex_id] = offset
+        self._absorbed[target].append(vertex_id)
+
+    def resolve(self, vertex_id: int) -> tuple[int, list[float]]:
+        """The live vertex standing for ``vertex_id`` and the pose of the latter in its frame."""
+        if not 0 <= vertex_id < self.num_ids:
+            raise EventError(
+                f"vertex {vertex_id} does not exist (known ids: 0..{self.num_ids - 1}); "
+                "the front end referred to a vertex it never created"
+            )
+        return int(self.alias[vertex_id]), self.alias_offset[vertex_id].tolist()
+
+    def pose_of(self, vertex_id: int) -> Pose:
+        """Map pose of ``vertex_id`` (through its alias if it was declined or removed)."""
+        target, offset = self.resolve(vertex_id)
+        return compose_scalar(self.pose[target].tolist(), offset)
+
+    def live_ids(self) -> IntArray:
+        """Ids of the live vertices, ascending."""
+        return np.flatnonzero(self.alive[: self.num_ids]).astype(np.int64)
+
+    def first_live(self) -> int:
+        """The oldest live vertex (the map's anchor), or -1."""
+        live = np.flatnonzero(self.alive[: self.num_ids])
+        return int(live[0]) if live.size else -1
+
+    # ------------------------------------------------------------------ edges
+    def edge_between(self, a: int, b: int) -> int:
+        """Index of the live edge joining ``a`` and ``b`` (either direction), or -1."""
+        return self.adjacency[a].get(b, -1)
+
+    def add_edge(
+        self, src: int, dst: int, rel: Pose | list[float], t: float, kind: EdgeKind, cluster: int
+    ) -> int:
+        """Add an edge ``src -> dst`` with relative pose ``rel`` (of dst in src's frame)."""
+        k = self.num_edges_total
+        cap = self.edge_from.shape[0]
+        if k + 1 > cap:
+            new = 2 * cap
+            self.edge_from = _grow(self.edge_from, new)
+            self.edge_to = _grow(self.edge_to, new)
+            self.edge_rel = _grow(self.edge_rel, new)
+            self.edge_time = _grow(self.edge_time, new)
+            self.edge_kind = _grow(self.edge_kind, new)
+            self.edge_cluster = _grow(self.edge_cluster, new, fill=-1)
+            self.edge_alive = _grow(self.edge_alive, new)
+        self.edge_from[k], self.edge_to[k] = src, dst
+        self.edge_rel[k] = (rel[0], rel[1], wrap(rel[2]))
+        self.edge_time[k] = t
+        self.edge_kind[k] = kind
+        self.edge_cluster[k] = cluster
+        self.edge_alive[k] = True
+        self.adjacency[src][dst] = k
+        self.adjacency[dst][src] = k
+        self.num_edges_total += 1
+        self.num_edges += 1
+        if kind == EdgeKind.LOOP_CLOSURE:
+            self.num_loop_edges += 1
+        return k
+
+    def remove_edge(self, k: int) -> None:
+        """Remove edge ``k`` (no-op if already removed)."""
+        if not self.edge_alive[k]:
+            return
+        self.edge_alive[k] = False
+        a, b = int(self.edge_from[k]), int(self.edge_to[k])
+        if self.adjacency[a].get(b) == k:
+            del self.adjacency[a][b]
+        if self.adjacency[b].get(a) == k:
+            del self.adjacency[b][a]
+        self.num_edges -= 1
+        if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
+            self.num_loop_edges -= 1
+
+    def live_edges(self) -> IntArray:
+        """Indices of the live edges, in creation order."""
+        return np.flatnonzero(self.edge_alive[: self.num_edges_total]).astype(np.int64)
+
+    def edge_length(self, k: int) -> float:
+        """Length of edge ``k``'s measured translation (m)."""
+        return math.hypot(self.edge_rel[k, 0], self.edge_rel[k, 1])
+
+    # ------------------------------------------------------------------ merging
+    def merge_vertex(self, removed: int, kept: int, offset: Pose | list[float]) -> None:
+        """Remove vertex ``removed`` and re-attach its edges to ``kept``.
+
+        ``offset`` is the pose of ``removed`` in the frame of ``kept``. An edge that would join
+        ``kept`` to itself is dropped; an edge that would duplicate an existing connection of
+        ``kept`` to the same vertex is dropped as redundant (the existing edge stays). Every id
+        that stood for ``removed`` stands for ``kept`` afterwards.
+        """
+        inv_offset = inverse_scalar(offset)
+        kept_adjacency = self.adjacency[kept]
+        for other, k in list(self.adjacency[removed].items()):
+            del self.adjacency[removed][other]
+            del self.adjacency[other][removed]
+            if other == kept or other in kept_adjacency:
+                self.edge_alive[k] = False
+                self.num_edges -= 1
+                if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
+                    self.num_loop_edges -= 1
+                continue
+            if self.edge_from[k] == removed:
+                self.edge_from[k] = kept
+                self.edge_rel[k] = compose_scalar(offset, self.edge_rel[k].tolist())
+            else:
+                self.edge_to[k] = kept
+                self.edge_rel[k] = compose_scalar(self.edge_rel[k].tolist(), inv_offset)
+            kept_adjacency[other] = k
+            self.adjacency[other][kept] = k
+        moved = [removed, *self._absorbed[removed]]
+        self._absorbed[removed] = []
+        index = np.asarray(moved, dtype=np.int64)
+        self.alias_offset[index] = compose(np.asarray(offset), self.alias_offset[index])
+        self.alias[index] = kept
+        self._absorbed[kept].extend(moved)
+        self.alive[removed] = False
+        self.num_vertices -= 1
+
+    # ------------------------------------------------------------------ queries
+    def graph_distance_below(self, source: int, target: int, limit: float) -> bool:
+        """Whether a path of edges from ``source`` to ``target`` is shorter than ``limit`` (m).
+
+        Dijkstra over measured edge lengths, stopped at ``limit``: cheap when the answer is no
+        path that short, which is what a consistency test needs to know.
+        """
+        if source == target:
+            return limit > 0
+        best = {source: 0.0}
+        heap = [(0.0, source)]
+        rel = self.edge_rel
+        while heap:
+            dist, v = heapq.heappop(heap)
+            if dist >= limit:
+                return False
+            if v == target:
+                return True
+            if dist > best.get(v, math.inf):
+                continue
+            for w, k in self.adjacency[v].items():
+                nd = dist + math.hypot(rel[k, 0], rel[k, 1])
+                if nd < best.get(w, math.inf) and nd < limit:
+                    best[w] = nd
+                    heapq.heappush(heap, (nd, w))
+        return False
+
+    def shortest_path(
+        self, source: int, target: int, limit: float, excluded: set[int]
+    ) -> tuple[list[int], float] | None:
+        """Shortest path ``source -> target`` (vertex list, length) avoiding ``excluded``.
+
+        Only paths shorter than ``limit`` are searched; None when there is none.
+        """
+        best = {source: 0.0}
+        parent: dict[int, int] = {}
+        heap = [(0.0, source)]
+        rel = self.edge_rel
+        while heap:
+            dist, v = heapq.heappop(heap)
+            if v == target:
+                path = [v]
+                while v in parent:
+                    v = parent[v]
+                    path.append(v)
+                return path[::-1], dist
+            if dist > best.get(v, math.inf):
+                continue
+            for w, k in self.adjacency[v].items():
+                if w in excluded:
+                    continue
+                nd = dist + math.hypot(rel[k, 0], rel[k, 1])
+                if nd < best.get(w, math.inf) and nd < limit:
+                    best[w] = nd
+                    parent[w] = v
+                    heapq.heappush(heap, (nd, w))
+        return None
+
+    # ------------------------------------------------------------------ views
+    def snapshot(self, current_vertex: int, current_pose: FloatArray) -> MapSnapshot:
+        """Copy of the live vertices and edges."""
+        ids = self.live_ids()
+        e = self.live_edges()
+        return MapSnapshot(
+            vertex_ids=ids,
+            poses=self.pose[ids].copy(),
+            vertex_time=self.vertex_time[ids].copy(),
+            vertex_view=self.view[ids].copy(),
+            edge_from=self.edge_from[e].copy(),
+            edge_to=self.edge_to[e].copy(),
+            edge_rel=self.edge_rel[e].copy(),
+            edge_time=self.edge_time[e].copy(),
+            edge_kind=self.edge_kind[e].copy(),
+            edge_cluster=self.edge_cluster[e].copy(),
+            current_vertex=current_vertex,
+            current_pose=current_pose,
+        )
+
+    def to_pose_graph(self, noise_model: bool = False) -> PoseGraph:
+        """The live map as a pose graph, first live vertex fixed.
+
+        Information is the identity (the paper), or with ``noise_model`` each edge's expected
+        precision (:func:`~cogmap_core.edge_noise.edge_information`).
+        """
+        ids = self.live_ids()
+        e = self.live_edges()
+        index = np.searchsorted(ids, np.r_[self.edge_from[e], self.edge_to[e]])
+        m = e.shape[0]
+        fixed = np.zeros(ids.shape[0], dtype=bool)
+        if fixed.size:
+            fixed[0] = True
+        return PoseGraph(
+            vertex_ids=ids,
+            poses=self.pose[ids].copy(),
+            edge_from=index[:m],
+            edge_to=index[m:],
+            measurements=self.edge_rel[e].copy(),
+            information=edge_information(self.edge_kind[e], self.edge_rel[e], noise_model),
+            fixed=fixed,
+        )

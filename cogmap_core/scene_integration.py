@@ -1,0 +1,231 @@
+"""Scene integration (paper, "Scene Integration"): revisited vertices merged into the old ones.
+
+"When the robot revisits familiar image views, redundant vertices should not be added and the
+same scenes are integrated." Vertices are added while revisiting and removed once the map shows
+where they belong (paper: "we remove revisited vertices after optimization, not avoid adding
+redundant vertices to begin with").
+
+**Which vertices are redundant because of a revisit.** While the robot re-walks a known route, the
+front end re-localises it on old vertices (link + set current); the map only gets a new vertex
+there when the front end proposes one (the view changed, the pose cells drifted). Such vertices
+come in *revisit runs*: the vertices created after the robot was re-localised on known ground
+(``start``) until it is re-localised on known ground again (``end``, joined to the run's last
+vertex by the loop-closure edge of that relocalisation). Known ground is a vertex made at least
+``integration_min_age`` seconds before; a relocalisation on a vertex the robot just made (while it
+spins on the spot, or closes a small loop of new ground) does not end a run. A run is redundant --
+the paper's cases A (one vertex), B (several vertices onto one) and C (several vertices and their
+edges just removed) -- when
+
+1. ``start`` and ``end`` are known ground for the whole run (at least ``integration_min_age``
+   older than its first vertex; neither belongs to the run);
+2. the closing link agrees with the map: its residual, weighed as the optimiser weighs it, is at
+   most ``integration_max_residual`` (an edge the optimisation could not satisfy is no
+   evidence); and
+3. every vertex of the run lies within ``integration_radius`` of an edge of known ground (an
+   edge whose vertices are at least ``integration_min_age`` older than the run): the run
+   re-walked mapped corridors.
+
+Each vertex of a redundant run is merged into the nearer end of that edge, its edges re-attached
+with the current (optimised) relative pose. Nothing else is ever removed: a first-visit vertex
+belongs to no run that starts on known ground and passes 3 -- not even the last one before a loop
+closes, a few centimetres short of the place the robot then recognises -- and the vertex where
+the robot leaves known ground begins a run that does not stay on known ground.
+
+**When.** A run is judged when it closes if its closing link already agrees with the map (2
+holds before any optimisation: the optimisation would not move it), otherwise after the next
+batch optimisation -- the paper's order, which lets the optimisation decide where the run
+converges. Runs are judged one after the other against the map as the merges before left it;
+``start`` and ``end`` are resolved to the vertices that absorbed them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from cogmap_core.config import MapParams
+from cogmap_core.edge_noise import LINK_SIGMA_HEADING, LINK_SIGMA_POSITION
+from cogmap_core.geometry import between, compose_scalar
+from cogmap_core.map_graph import MapGraph, wrap
+
+
+@dataclass(slots=True)
+class RevisitRun:
+    """Vertices created between two relocalisations on known ground.
+
+    Attributes:
+        start: vertex id the robot was at when the run began.
+        vertices: the vertices created, in order.
+        created: data time of the first vertex.
+        end: vertex id the robot re-localised on when the run closed (-1 while open).
+        closing: the closing link's measurement: the pose of ``end``'s place in the frame of the
+            run's last vertex.
+        closed: data time of the closing relocalisation.
+
+    """
+
+    start: int
+    vertices: list[int] = field(default_factory=list)
+    created: float = 0.0
+    end: int = -1
+    closing: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    closed: float = math.nan
+
+
+class KnownEdges:
+    """Spatial index of the map's live edges (built after an optimisation, when poses settle).
+
+    Each edge is cut into pieces no longer than the integration radius; a KD-tree over the piece
+    midpoints answers "which edges pass within ``radius`` of this point", exactly. Each edge
+    remembers when its newer vertex was made, so a run only counts edges of ground known before
+    it. Edges removed since the index was built still stand for ground between two real places.
+    """
+
+    def __init__(self, graph: MapGraph, radius: float) -> None:
+        """Index every live edge of ``graph``."""
+        edges = graph.live_edges()
+        a_id, b_id = graph.edge_from[edges], graph.edge_to[edges]
+        a, b = graph.pose[a_id, :2], graph.pose[b_id, :2]
+        piece = max(radius, 1e-3)
+        counts = np.maximum(np.ceil(np.hypot(*(b - a).T) / piece).astype(np.int64), 1)
+        owner = np.repeat(np.arange(edges.size), counts)
+        first = np.cumsum(counts) - counts
+        index = np.arange(owner.size) - first[owner]
+        direction = b[owner] - a[owner]
+        self.start = a[owner] + direction * (index / counts[owner])[:, None]
+        self.end = a[owner] + direction * ((index + 1) / counts[owner])[:, None]
+        self.ends = np.stack([a_id[owner], b_id[owner]], axis=1)
+        self.newest = np.maximum(graph.vertex_time[a_id], graph.vertex_time[b_id])[owner]
+        self.tree = cKDTree(0.5 * (self.start + self.end)) if owner.size else None
+        longest = float(np.max(np.hypot(*(self.end - self.start).T))) if owner.size else 0.0
+        self.reach = radius + 0.5 * longest
+        self.radius = radius
+
+    def nearest(self, point: np.ndarray, known_before: float) -> tuple[int, int] | None:
+        """The closest edge of ground known before ``known_before`` within the radius of ``point``.
+
+        Returns its two vertex ids, or None when no such edge passes within the radius.
+        """
+        if self.tree is None:
+            return None
+        candidates = np.asarray(self.tree.query_ball_point(point, self.reach), dtype=np.int64)
+        if candidates.size:
+            candidates = candidates[self.newest[candidates] <= known_before]
+        if candidates.size == 0:
+            return None
+        a, b = self.start[candidates], self.end[candidates]
+        ab = b - a
+        denom = np.einsum("ij,ij->i", ab, ab)
+        t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
+        gap = np.hypot(*(point - (a + ab * t[:, None])).T)
+        best = int(np.argmin(gap))
+        if gap[best] > self.radius:
+            return None
+        u, v = self.ends[candidates[best]]
+        return int(u), int(v)
+
+
+class SceneIntegration:
+    """Collects revisit runs as events arrive and merges the redundant ones (module doc)."""
+
+    def __init__(self) -> None:
+        """No run yet."""
+        self.open: RevisitRun | None = None
+        self.pending: list[RevisitRun] = []
+        self._known: KnownEdges | None = None
+
+    def on_vertex(self, vertex: int, parent: int, time: float) -> None:
+        """A vertex was added, joined by a sequential edge to ``parent``."""
+        if self.open is None:
+            self.open = RevisitRun(start=parent, created=time)
+        self.open.vertices.append(vertex)
+
+    def on_relocalised(
+        self,
+        graph: MapGraph,
+        end: int,
+        closing: tuple[float, float, float],
+        time: float,
+        params: MapParams,
+    ) -> int:
+        """The robot was re-localised on vertex id ``end``; return vertices merged right away.
+
+        ``closing`` is the pose of ``end``'s place in the frame of the current vertex.
+        """
+        run = self.open
+        if run is None or time - graph.vertex_time[end] < params.integration_min_age:
+            return 0  # nothing open, or the robot re-localised on what it just mapped
+        self.open = None
+        run.end, run.closing, run.closed = end, closing, time
+        if _closing_residual(graph, run, params) > params.integration_max_residual:
+            self.pending.append(run)  # let the optimisation decide
+            return 0
+        merged = self._judge(graph, run, params)
+        if merged < 0:
+            self.pending.append(run)
+            return 0
+        return merged
+
+    def after_optimisation(self, graph: MapGraph, params: MapParams) -> int:
+        """Judge every pending run on the optimised map; return the vertices merged."""
+        self._known = None  # poses moved
+        runs, self.pending = self.pending, []
+        merged = 0
+        for run in runs:
+            if _closing_residual(graph, run, params) <= params.integration_max_residual:
+                merged += max(self._judge(graph, run, params, final=True), 0)
+        return merged
+
+    def _judge(
+        self, graph: MapGraph, run: RevisitRun, params: MapParams, final: bool = False
+    ) -> int:
+        """Merge what is redundant in a closed run; -1 when it should wait for an optimisation."""
+        radius = params.integration_radius
+        members = [v for v in run.vertices if graph.alive[v]]
+        if not members or radius <= 0:
+            return 0
+        start = graph.resolve(run.start)[0]
+        end = graph.resolve(run.end)[0]
+        known_before = run.created - params.integration_min_age
+        if end in members or graph.vertex_time[end] > known_before:
+            return 0  # not closed on ground known before the run
+        if start in members or graph.vertex_time[start] > known_before:
+            return 0  # not started on ground known before the run
+        if self._known is None:
+            self._known = KnownEdges(graph, radius)
+        absorbers = []
+        for v in members:
+            edge = self._known.nearest(graph.pose[v, :2], known_before)
+            if edge is None:
+                return 0 if final else -1  # off known ground (now): not a re-walk
+            u, w = (graph.resolve(x)[0] for x in edge)
+            gaps = np.hypot(*(graph.pose[[u, w], :2] - graph.pose[v, :2]).T)
+            absorbers.append(u if gaps[0] <= gaps[1] else w)
+        merged = 0
+        for v, kept in zip(members, absorbers, strict=True):
+            kept = graph.resolve(kept)[0]
+            if graph.alive[v] and kept != v:
+                _merge(graph, v, kept)
+                merged += 1
+        return merged
+
+
+def _closing_residual(graph: MapGraph, run: RevisitRun, params: MapParams) -> float:
+    """Norm of the closing link's residual on the current poses, weighed as the optimiser does.
+
+    In metres of loop-closure error: with the noise model, heading counts with the ratio of a
+    loop closure's position and heading precision (:mod:`~cogmap_core.edge_noise`).
+    """
+    place = graph.pose_of(run.end)
+    predicted = compose_scalar(graph.pose_of(run.vertices[-1]), run.closing)
+    dx, dy = predicted[0] - place[0], predicted[1] - place[1]
+    weight = LINK_SIGMA_POSITION / LINK_SIGMA_HEADING if params.edge_noise_model >= 0.5 else 1.0
+    return math.sqrt(dx * dx + dy * dy + (weight * wrap(predicted[2] - place[2])) ** 2)
+
+
+def _merge(graph: MapGraph, removed: int, kept: int) -> None:
+    offset = tuple(between(graph.pose[kept], graph.pose[removed]).tolist())
+    graph.merge_vertex(removed, kept, offset)

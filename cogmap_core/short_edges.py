@@ -1,0 +1,45 @@
+"""Removing short edges (paper, "Removing Short Edges").
+
+"Due to motion noise and measuring error, redundant vertices might be created. After loop
+closures, extra constraints also need to be removed. These points represent same information.
+One of these points will be kept, and others are removed." After each batch optimisation, every
+edge whose two vertices lie closer than ``short_edge_threshold`` is contracted: the edge's first
+vertex is removed (the paper's figure removes ``e_{i+1}`` of the short edge ``e_{i+1,i+2}``) and
+its edges re-attached to the second, with the optimised relative pose -- the same rule as scene
+integration -- so cases A (two edges merged into one), B and C (multiple constraints between the
+two: the redundant ones dropped) follow. The map's first vertex anchors the map and is never
+removed (the other end is removed instead). Edges made short by a contraction are checked too.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+from cogmap_core.geometry import between
+from cogmap_core.map_graph import MapGraph
+
+
+def remove_short_edges(graph: MapGraph, threshold: float) -> int:
+    """Contract edges shorter than ``threshold`` (m) on the current poses; return removals."""
+    if threshold <= 0:
+        return 0
+    pose = graph.pose
+
+    def short(k: int) -> bool:
+        a, b = graph.edge_from[k], graph.edge_to[k]
+        return math.hypot(pose[a, 0] - pose[b, 0], pose[a, 1] - pose[b, 1]) < threshold
+
+    queue = deque(int(k) for k in graph.live_edges() if short(int(k)))
+    anchor = graph.first_live()
+    removed = 0
+    while queue:
+        k = queue.popleft()
+        if not graph.edge_alive[k] or not short(k):
+            continue
+        src, dst = int(graph.edge_from[k]), int(graph.edge_to[k])
+        gone, kept = (src, dst) if src != anchor else (dst, src)
+        graph.merge_vertex(gone, kept, tuple(between(pose[kept], pose[gone]).tolist()))
+        removed += 1
+        queue.extend(k2 for k2 in graph.adjacency[kept].values() if short(k2))
+    return removed

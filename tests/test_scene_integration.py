@@ -1,0 +1,284 @@
+"""Scene integration on the event patterns the front end emits (paper, "Scene Integration").
+
+Revisits come as *link + set current vertex* on old vertices, with the occasional new vertex the
+front end proposes on known ground; first visits come as *create vertex*. The scripted loop below
+produces exactly those patterns (the recorded streams of generated bags are replayed in
+``test_map_fidelity.py``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cogmap_core.cognitive_map import CognitiveMap
+from cogmap_core.config import MapParams
+from cogmap_core.geometry import between
+from tests.mapscript import Script
+
+HALF_PI = math.pi / 2
+STEP = 0.05  # m between front-end experiences, as dense as the front end's
+SIDE = 20  # steps per side of the 1 m square
+LAP = 4 * SIDE
+DT = 0.2  # s per step: a lap takes 16 s, more than integration_min_age (10 s)
+NO_GATE = {"gate_position": 1e9, "gate_heading": 1e9}
+
+
+class SquareLoop:
+    """A robot lapping a 1 m square, driven event by event like the front end drives the map."""
+
+    def __init__(self, dt: float = DT) -> None:
+        self.s = Script(dt)
+        self.step = 0
+        self.first: list[int] = [self.s.create()]  # first-visit vertex at each step of lap 1
+        self.new: list[int] = []  # vertices proposed on later laps
+
+    def advance(self) -> None:
+        """Move to the next step of the square (turning left at the corners)."""
+        corner = self.step > 0 and self.step % SIDE == 0
+        self.s.move(STEP, HALF_PI if corner else 0.0)
+        self.step += 1
+
+    def first_lap(self) -> None:
+        while self.step < LAP - 1:
+            self.advance()
+            self.first.append(self.s.create())
+        self.advance()  # back at the start
+
+    def known_lap(self, propose: set[int] = frozenset(), chains: set[int] = frozenset()) -> None:
+        """One lap on known ground: relocalise at each step, except where a vertex is proposed.
+
+        ``propose``: lap positions where the front end proposes one new vertex (then relocalises
+        at the next step: a run of one, case A). ``chains``: positions where it keeps proposing
+        (case C).
+        """
+        for _ in range(LAP):
+            position = self.step % LAP
+            if position in propose or position in chains:
+                self.new.append(self.s.create())
+            else:
+                self.s.relocalise(self.first[position])
+            self.advance()
+
+
+def build(mode: str, script: Script, **params: float) -> CognitiveMap:
+    cmap = CognitiveMap(mode, MapParams(**params))
+    cmap.apply_all(script.events)
+    cmap.finish()
+    return cmap
+
+
+def alive(cmap: CognitiveMap) -> list[int]:
+    return cmap.snapshot().vertex_ids.tolist()
+
+
+# ------------------------------------------------------------------------------------------
+# a corridor re-walked keeps its size
+# ------------------------------------------------------------------------------------------
+
+
+def test_loop_rewalked_five_times_keeps_its_vertex_count():
+    loop = SquareLoop()
+    loop.first_lap()
+    sizes: dict[str, list[int]] = {"standard": [], "scene_integration": [], "compact": []}
+    events_after_lap = [len(loop.s.events)]
+    for lap in range(5):
+        # the front end proposes a vertex now and then, and a chain of three once per lap
+        loop.known_lap(propose={7 + lap, 31, 52 + 2 * lap}, chains={65, 66, 67})
+        events_after_lap.append(len(loop.s.events))
+    for mode in sizes:
+        cmap = CognitiveMap(mode)
+        done = 0
+        for end in events_after_lap:
+            cmap.apply_all(loop.s.events[done:end])
+            done = end
+            cmap.optimize_now()  # settle, as the end of a cluster does
+            sizes[mode].append(cmap.num_vertices)
+    assert sizes["standard"] == [LAP + 6 * k for k in range(6)]  # every proposal kept
+    assert sizes["scene_integration"] == [LAP] * 6  # every revisit vertex merged
+    compact = sizes["compact"]
+    assert max(compact) - min(compact) <= 1, compact
+    assert compact[0] < LAP / 3  # neighborhood fields keep about one vertex in six
+
+
+def test_revisit_vertex_merges_into_the_old_place_case_a():
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.known_lap(propose={33})  # position 33 is on the second side, x = 1, y = 0.65
+    v = loop.new[0]
+    standard = build("standard", loop.s)
+    assert v in alive(standard)
+    cmap = build("scene_integration", loop.s)
+    assert alive(cmap) == loop.first
+    kept, offset = cmap.resolve(v)
+    assert kept == loop.first[33]
+    np.testing.assert_allclose(offset, [0.0, 0.0, 0.0], atol=1e-9)
+    assert cmap.integrated_vertices == 1
+    # the sequential edge into the revisit and its loop closure collapse onto the old edges
+    assert cmap.num_edges == LAP  # the lap's 80 sequential edges, the closing edge 79 -> 0
+
+
+def test_several_revisit_vertices_onto_one_old_vertex_case_b():
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.s.relocalise(loop.first[0])  # back at the start, recognised
+    for _ in range(3):  # it spins on the spot; the front end proposes a vertex at each new
+        loop.s.move(0.0, 0.3)  # view, then recognises the place again
+        loop.new.append(loop.s.create())
+    loop.s.move(0.0, -0.9)
+    loop.known_lap()
+    cmap = build("scene_integration", loop.s)
+    assert alive(cmap) == loop.first
+    assert {cmap.resolve(v)[0] for v in loop.new} == {loop.first[0]}
+    for v in loop.new:  # each keeps its own heading, as a pose in the absorber's frame
+        expected = between(loop.s.truth[loop.first[0]], loop.s.truth[v])
+        np.testing.assert_allclose(cmap.resolve(v)[1], expected, atol=1e-9)
+        assert abs(expected[2]) > 0.2
+
+
+def test_chain_of_revisit_vertices_removed_case_c():
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.known_lap(chains=set(range(44, 56)))  # twelve proposals in a row, then recognised
+    cmap = build("scene_integration", loop.s)
+    assert alive(cmap) == loop.first
+    assert [cmap.resolve(v)[0] for v in loop.new] == [loop.first[p] for p in range(44, 56)]
+    assert cmap.num_loop_edges == 1  # only the lap's closing link 79 -> 0 is left
+    standard = build("standard", loop.s)
+    assert standard.num_vertices == LAP + 12
+
+
+# ------------------------------------------------------------------------------------------
+# what is never removed
+# ------------------------------------------------------------------------------------------
+
+
+def detour_lap(loop: SquareLoop) -> list[int]:
+    """A lap that leaves the square at the corner (1, 0), explores 3 m, returns at (1, 1)."""
+    explored = []
+    while loop.step % LAP != SIDE:  # known ground up to the corner (1, 0)
+        loop.s.relocalise(loop.first[loop.step % LAP])
+        loop.advance()
+    loop.s.relocalise(loop.first[SIDE])
+    for leg, turn in ((SIDE, 0.0), (SIDE, HALF_PI), (SIDE, HALF_PI)):
+        for k in range(leg):
+            loop.s.move(STEP, turn if k == 0 else 0.0)
+            explored.append(loop.s.create())  # first visits: (1.05, 0) ... (1.05, 1) ... (1, 1)
+    # it comes back onto the square at (1, 1), facing west, and is recognised there
+    loop.step = 2 * SIDE
+    loop.s.relocalise(loop.first[2 * SIDE])
+    loop.advance()
+    while loop.step % LAP != 0:
+        loop.s.relocalise(loop.first[loop.step % LAP])
+        loop.advance()
+    return explored
+
+
+def test_frontier_and_first_visit_vertices_survive():
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.known_lap()
+    loop.s.move(0.0, 0.0)
+    explored = detour_lap(loop)
+    cmap = build("scene_integration", loop.s)
+    kept = set(alive(cmap))
+    assert explored[0] in kept  # the frontier vertex, where the robot leaves known ground
+    # every first visit survives, also the last one, 5 cm short of the place it came back to
+    assert [v for v in explored if v not in kept] == []
+    compact = build("compact", loop.s)
+    compact_explored = [v for v in explored if compact.resolve(v)[0] == v]
+    assert explored[0] not in compact_explored  # declined by neighborhood fields, not merged
+    assert len(compact_explored) >= 8  # the new 3 m keep their compact vertices
+
+
+def test_two_first_visit_vertices_are_never_merged():
+    """Into a dead end and back out: the way out passes the way in's vertices 2-4 s later."""
+    s = Script(dt=0.2)
+    way_in = [s.create()]
+    for _ in range(10):
+        s.move(STEP)
+        way_in.append(s.create())
+    s.move(0.0, math.pi)  # U-turn at the dead end
+    way_out = []
+    for k in range(10):
+        s.move(STEP)
+        way_out.append(s.create())
+        s.relocalise(way_in[9 - k])  # recognised on what it mapped seconds ago
+    cmap = build("scene_integration", s)
+    assert alive(cmap) == way_in + way_out
+    assert cmap.integrated_vertices == 0
+
+
+# ------------------------------------------------------------------------------------------
+# each knob matters
+# ------------------------------------------------------------------------------------------
+
+
+def lap_with_offset_revisit(lateral: float) -> SquareLoop:
+    """Lap 2 proposes a vertex ``lateral`` m to the left of the old route at position 10."""
+    loop = SquareLoop()
+    loop.first_lap()
+    while loop.step % LAP != 10:
+        loop.s.relocalise(loop.first[loop.step % LAP])
+        loop.advance()
+    loop.s.move(0.0, HALF_PI)
+    loop.s.move(lateral)
+    loop.s.move(0.0, -HALF_PI)
+    loop.new.append(loop.s.create())
+    loop.s.move(0.0, -HALF_PI)
+    loop.s.move(lateral)
+    loop.s.move(0.0, HALF_PI)
+    loop.advance()
+    while loop.step % LAP != 0:
+        loop.s.relocalise(loop.first[loop.step % LAP])
+        loop.advance()
+    return loop
+
+
+def test_integration_radius_decides_how_far_a_revisit_may_lie():
+    loop = lap_with_offset_revisit(lateral=0.07)
+    v = loop.new[0]
+    assert v not in alive(build("scene_integration", loop.s, integration_radius=0.1))
+    assert v in alive(build("scene_integration", loop.s, integration_radius=0.05))
+
+
+def test_integration_max_residual_keeps_revisits_whose_closing_link_disagrees():
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.known_lap(propose={30})
+    v = loop.new[0]
+    # the closing link claims the robot is at position 34 (0.15 m ahead): it contradicts
+    # odometry, and the optimisation cannot satisfy it
+    events = loop.s.events
+    k = next(i for i, e in enumerate(events) if getattr(e, "target", None) == loop.first[31])
+    events[k] = type(events[k])(events[k].time, loop.first[34], events[k].relative_rad)
+    events[k + 1] = type(events[k + 1])(events[k + 1].time, loop.first[34], 0.0)
+    kept = build("scene_integration", loop.s, **NO_GATE)
+    assert v in alive(kept)
+    merged = build("scene_integration", loop.s, integration_max_residual=1.0, **NO_GATE)
+    assert v not in alive(merged)
+
+
+def test_integration_min_age_separates_revisits_from_recent_ground():
+    loop = SquareLoop(dt=0.1)  # a lap now takes 8 s
+    loop.first_lap()
+    loop.known_lap(propose={20})
+    v = loop.new[0]
+    assert v in alive(build("scene_integration", loop.s))  # 8 s < integration_min_age 10 s
+    assert v not in alive(build("scene_integration", loop.s, integration_min_age=5.0))
+
+
+@pytest.mark.parametrize("mode", ["scene_integration", "compact"])
+def test_merges_reevaluated_against_the_final_absorber(mode):
+    """A revisit of a revisit: lap 3's vertex lands on lap 2's, which lap 2 merged already."""
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.known_lap(propose={12})
+    loop.known_lap(propose={12})
+    cmap = build(mode, loop.s)
+    first_id, second_id = loop.new
+    assert cmap.resolve(second_id)[0] == cmap.resolve(first_id)[0]
+    assert cmap.resolve(first_id)[0] in loop.first
+    np.testing.assert_allclose(cmap.vertex_pose(second_id), cmap.vertex_pose(first_id), atol=1e-9)
