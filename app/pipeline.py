@@ -25,7 +25,12 @@ from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagReader, BagTopics, open_bag
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError
-from cogmap_core.evaluation import align_rigid_2d
+from cogmap_core.evaluation import (
+    LAYOUT_RADIUS,
+    TRUE_LOOP_CLOSURE_DISTANCE,
+    TRUE_LOOP_CLOSURE_HEADING,
+    align_rigid_2d,
+)
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
 from cogmap_core.slam import SlamSession, optimisation_summary
@@ -55,23 +60,36 @@ class RunResult:
 
     def table(self) -> str:
         """A compact one-line-per-map summary table."""
+        radius = self.summary.get("layout_radius_m", LAYOUT_RADIUS)
         lines = [
-            f"{'map':18} {'vertices':>8} {'edges':>7} {'loops':>6} {'clusters':>8} "
-            f"{'optims':>6} {'opt s':>7} {'ATE m':>7}"
+            f"{'map':18} {'vertices':>8} {'edges':>7} {'E/V':>5} {'loops':>6} {'clusters':>8} "
+            f"{'optims':>6} {'opt s':>6} {'ATE m':>7} {'compl':>6} {'corr':>6}"
         ]
+
+        def fmt(value: float | None, spec: str) -> str:
+            return "-" if value is None else format(value, spec)
+
         for name, m in self.summary["maps"].items():
-            ate = "-" if m["ate_m"] is None else f"{m['ate_m']:.3f}"
             lines.append(
-                f"{name:18} {m['vertices']:8d} {m['edges']:7d} {m['loop_edges']:6d} "
-                f"{m['clusters']:8d} {m['optimizations']:6d} {m['optimize_wall_s']:7.2f} {ate:>7}"
+                f"{name:18} {m['vertices']:8d} {m['edges']:7d} "
+                f"{fmt(m['edges_per_vertex'], '5.2f')} "
+                f"{m['loop_edges']:6d} {m['clusters']:8d} {m['optimizations']:6d} "
+                f"{m['optimize_wall_s']:6.2f} {fmt(m['ate_m'], '7.3f'):>7} "
+                f"{fmt(m['completeness'], '6.3f'):>6} {fmt(m['correctness'], '6.3f'):>6}"
             )
         s = self.summary
         lc = s["loop_closures"]
         precision = "-" if lc["precision"] is None else f"{lc['precision']:.3f}"
+        dead_reckoning = s.get("dead_reckoning_ate_m")
+        lines.append(
+            f"compl/corr: share of the true path within {radius * 100:g} cm of the map / of the "
+            f"map within {radius * 100:g} cm of the true path; dead-reckoning ATE "
+            f"{fmt(dead_reckoning, '.3f')} m"
+        )
         lines.append(
             f"{s['frames']} frames, {s['data_duration_s']:.1f} s of data in {s['wall_s']:.1f} s "
             f"({s['realtime_factor']:.1f}x real time); loop closures {lc['total']} "
-            f"(precision {precision})"
+            f"(precision {precision}, position and heading)"
         )
         return "\n".join(lines)
 
@@ -100,8 +118,9 @@ def session_summary(
     last: float,
     wall: float,
     read_warnings: dict[str, Any],
+    layout_radius: float = LAYOUT_RADIUS,
 ) -> dict[str, Any]:
-    """The ``summary.json`` of a session: counts, timings and ATE per map, loop-closure score.
+    """The ``summary.json`` of a session: per map sizes, fidelity, accuracy, timings; links.
 
     Args:
         session: the session (its maps and event log).
@@ -110,6 +129,7 @@ def session_summary(
         last: data time of the last frame processed (s).
         wall: wall time the processing took (s).
         read_warnings: the reader's non-zero problem counters.
+        layout_radius: radius of layout completeness and correctness (m).
 
     """
     duration = max(last - first, 0.0)
@@ -119,18 +139,50 @@ def session_summary(
         entry: dict[str, Any] = optimisation_summary(cmap)
         ate = session.ate(cmap)
         entry["ate_m"] = None if ate is None else round(ate, 6)
+        fidelity = session.layout_fidelity(cmap, layout_radius)
+        entry["edges_per_vertex"] = (
+            round(cmap.num_edges / cmap.num_vertices, 4) if cmap.num_vertices else None
+        )
+        entry["completeness"] = None if fidelity is None else _rounded(fidelity.completeness)
+        entry["correctness"] = None if fidelity is None else _rounded(fidelity.correctness)
+        c = cmap.counters
+        entry["proposed"] = c.proposed
+        entry["declined"] = c.declined
+        entry["integrated"] = c.integrated
+        entry["short_edges_removed"] = c.short_edges
+        entry["duplicate_links"] = c.duplicate_links
+        entry["refused_relocalisations"] = c.refused_relocalisations
         maps[mode.value] = entry
     score = session.loop_closure_score()
+    links = session.log.link_table()
     if score is None:
-        total = sum(1 for e in session.log.events if type(e).__name__ == "LinkToVertex")
-        loops = {"total": total, "true": None, "false": None, "precision": None}
+        loops: dict[str, Any] = {
+            "total": len(links),
+            "true": None,
+            "false": None,
+            "precision": None,
+            "false_links": None,
+        }
     else:
+        assert score.position_error is not None and score.heading_error is not None
         loops = {
             "total": score.total,
             "true": score.true,
             "false": score.false,
             "precision": score.precision,
+            "tolerance_m": TRUE_LOOP_CLOSURE_DISTANCE,
+            "tolerance_deg": round(math.degrees(TRUE_LOOP_CLOSURE_HEADING), 6),
+            "false_links": [
+                {
+                    "time": round(links[k][0], 6),
+                    "target": links[k][1],
+                    "position_error_m": round(float(score.position_error[k]), 4),
+                    "heading_error_deg": round(math.degrees(float(score.heading_error[k])), 2),
+                }
+                for k in score.false_indices
+            ],
         }
+    dead_reckoning = session.log.dead_reckoning_ate()
     p = session.params
     return {
         "dataset": dataset,
@@ -145,10 +197,16 @@ def session_summary(
             "t_interval": p.t_interval,
             "t_total": p.t_total,
         },
+        "layout_radius_m": layout_radius,
+        "dead_reckoning_ate_m": None if dead_reckoning is None else round(dead_reckoning, 6),
         "maps": maps,
         "loop_closures": loops,
         "read_warnings": read_warnings,
     }
+
+
+def _rounded(value: float) -> float | None:
+    return None if math.isnan(value) else round(value, 6)
 
 
 def write_sizes_csv(maps: Mapping[MapMode, CognitiveMap], handle: TextIO) -> None:
@@ -203,7 +261,7 @@ class HeadlessPipeline:
         self._write_sizes()
         self._write_maps()
         self._write_trajectories()
-        self._write_figures(last)
+        self._write_figures(last, summary)
         return RunResult(summary, self.out_dir, list(self.files))
 
     # ------------------------------------------------------------------ steps
@@ -280,7 +338,7 @@ class HeadlessPipeline:
                 )
         self.files.append(path)
 
-    def _write_figures(self, end_time: float) -> None:
+    def _write_figures(self, end_time: float, summary: dict[str, Any]) -> None:
         histories = {m.value: self.session.maps[m].size_history() for m in MAP_ORDER}
         save_png(size_figure(histories, end_time), self.out_dir / "size.png")
         self.files.append(self.out_dir / "size.png")
@@ -298,7 +356,14 @@ class HeadlessPipeline:
                     poses = snap.poses.copy()
                     poses[:, :2] = tf.apply(snap.poses[:, :2])
                     aligned[mode.value] = poses
-        save_png(map_figure(truth_path, snaps, aligned), self.out_dir / "map.png")
+        notes = {}
+        for name, entry in summary["maps"].items():
+            if entry.get("completeness") is not None:
+                notes[name] = (
+                    f"ATE {entry['ate_m']:.3f} m, completeness {entry['completeness']:.3f}, "
+                    f"correctness {entry['correctness']:.3f}"
+                )
+        save_png(map_figure(truth_path, snaps, aligned, notes), self.out_dir / "map.png")
         self.files.append(self.out_dir / "map.png")
 
 

@@ -142,10 +142,13 @@ def map_figure(
     ground_truth: NDArray[np.float64] | None,
     maps: Mapping[str, MapSnapshot],
     aligned_poses: Mapping[str, NDArray[np.float64]] | None = None,
+    notes: Mapping[str, str] | None = None,
 ) -> NDArray[np.uint8]:
     """Ground-truth path beside each map (vertices as dots, sequential edges blue, loops red).
 
-    ``aligned_poses`` optionally gives each map's vertex poses aligned to the ground truth.
+    The paper's "Cognitive Map" figure: each map titled with its vertices and edges.
+    ``aligned_poses`` optionally gives each map's vertex poses aligned to the ground truth;
+    ``notes`` a second title line per map (e.g. its layout fidelity).
     """
     panels_spec: list[tuple[str, NDArray[np.float64], MapSnapshot | None]] = []
     if ground_truth is not None and len(ground_truth):
@@ -158,16 +161,16 @@ def map_figure(
     scale = min(side / (x1 - x0), side / (y1 - y0))
     pw, ph = int((x1 - x0) * scale), int((y1 - y0) * scale)
     width = 40 + len(panels_spec) * (pw + 40)
-    height = ph + 110
+    height = max(ph, 200) + 130
     img = np.full((height, width, 3), 255, np.uint8)
     for k, (title, poses, snap) in enumerate(panels_spec):
-        panel = Panel(img, 40 + k * (pw + 40), 50, pw, ph, (x0, x1), (y0, y1))
+        panel = Panel(img, 40 + k * (pw + 40), 70, pw, ph, (x0, x1), (y0, y1))
         cv2.rectangle(img, (panel.left, panel.top), (panel.left + pw, panel.top + ph), GREY, 1)
         label = title
         if snap is None:
             panel.polyline(poses[:, 0], poses[:, 1], (60, 160, 60), 1)
         else:
-            label = f"{title}: {len(snap.vertex_ids)} vertices, {len(snap.edge_from)} edges"
+            label = f"{title}: V {len(snap.vertex_ids)}, E {len(snap.edge_from)}"
             index = {v: i for i, v in enumerate(snap.vertex_ids.tolist())}
             a = np.array([index[v] for v in snap.edge_from.tolist()], dtype=np.int64)
             b = np.array([index[v] for v in snap.edge_to.tolist()], dtype=np.int64)
@@ -181,6 +184,8 @@ def map_figure(
             for p in panel.to_px(poses[:, 0], poses[:, 1]):
                 cv2.circle(img, (int(p[0]), int(p[1])), 2, (40, 150, 40), -1, cv2.LINE_AA)
         cv2.putText(img, label, (panel.left, 35), FONT, 0.45, BLACK, 1)
+        if notes and title in notes:
+            cv2.putText(img, notes[title], (panel.left, 57), FONT, 0.42, (90, 90, 90), 1)
     cv2.putText(img, "1 m", (20, height - 20), FONT, 0.45, BLACK, 1)
     cv2.line(img, (60, height - 25), (60 + int(scale), height - 25), BLACK, 2)
     return img

@@ -20,6 +20,8 @@ from cogmap_core.slam import SlamSession
 
 SUMMARY_KEYS = {
     "dataset",
+    "layout_radius_m",
+    "dead_reckoning_ate_m",
     "frames",
     "data_duration_s",
     "wall_s",
@@ -37,6 +39,15 @@ MAP_KEYS = {
     "optimizations",
     "optimize_wall_s",
     "ate_m",
+    "edges_per_vertex",
+    "completeness",
+    "correctness",
+    "proposed",
+    "declined",
+    "integrated",
+    "short_edges_removed",
+    "duplicate_links",
+    "refused_relocalisations",
 }
 
 
@@ -93,16 +104,30 @@ def test_summary_matches_the_bag_and_ground_truth(report: Path, maze_bag: Path, 
         assert entry["clusters"] == len(cmap.clusters)
         assert entry["optimizations"] == len(cmap.optimizations)
         assert entry["ate_m"] == pytest.approx(reference.ate(cmap), abs=1e-6)
-        # against the ground truth: the maps are metrically right (maze corridors are 0.3 m)
-        assert entry["ate_m"] < 0.12
+        fidelity = reference.layout_fidelity(cmap)
+        assert entry["completeness"] == pytest.approx(fidelity.completeness, abs=1e-6)
+        assert entry["correctness"] == pytest.approx(fidelity.correctness, abs=1e-6)
+        assert entry["proposed"] == cmap.counters.proposed
+        assert entry["refused_relocalisations"] == cmap.counters.refused_relocalisations
+        # against the ground truth: the maps keep the layout and stay with dead reckoning, which
+        # on this 2-lap bag is already within 3 cm -- about the error of a loop closure itself
+        # (the 6-lap targets, ATE <= 0.5 x dead reckoning, are benchmarks/map_layouts.py's)
+        assert entry["completeness"] >= 0.98 and entry["correctness"] >= 0.98
+        assert entry["ate_m"] <= 1.5 * summary["dead_reckoning_ate_m"]
     std, comp = summary["maps"]["standard"], summary["maps"]["compact"]
     assert comp["vertices"] < 0.15 * std["vertices"]
     assert comp["edges"] < 0.15 * std["edges"]
     loops = summary["loop_closures"]
-    assert loops["total"] == std["loop_edges"] > 50
+    # every link the front end emitted is judged; the standard map keeps one edge per pair
+    assert loops["total"] == reference.maps[MapMode.STANDARD].counters.links > 50
+    assert std["loop_edges"] + std["duplicate_links"] <= loops["total"]
     assert loops["true"] + loops["false"] == loops["total"]
     assert loops["precision"] == pytest.approx(loops["true"] / loops["total"])
     assert loops["precision"] >= 0.95
+    assert (loops["tolerance_m"], loops["tolerance_deg"]) == (0.1, 10.0)
+    assert len(loops["false_links"]) == loops["false"]
+    for link in loops["false_links"]:
+        assert link["position_error_m"] > 0.1 or abs(link["heading_error_deg"]) > 10.0
 
 
 def test_g2o_and_tum_files_agree_with_the_ground_truth(report: Path, reference):
