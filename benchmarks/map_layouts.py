@@ -1,0 +1,233 @@
+"""Map quality on several layouts: size beside layout fidelity, accuracy and robustness.
+
+For each 6-lap layout (the default dataset ``irat_australia`` and ``figure_eight``,
+``long_corridors``, ``junction_dead_end``), the bag is generated once into the cache and the
+front end run once (its events are cached beside the bag as an event file); then the three maps
+are built from the events with the paper's parameters and every figure is printed per map:
+
+- vertices, edges, loop edges, edges per vertex;
+- layout completeness and correctness at 8 cm against the dense ground-truth path;
+- ATE, beside the dead-reckoning ATE of the same bag;
+- size change over laps 3-6 (start of lap 3 to end of lap 6), on known ground (vertices made on
+  ground the robot first explored in those laps -- detours into corridors it had not driven --
+  set apart, see ``cogmap_core.evaluation.size_change``) and raw;
+- map build time as a realtime factor (data seconds per wall second, maps only) and, from the
+  front end's run, the whole pipeline's;
+- loop-closure precision (position within 0.1 m and heading within 20 degrees).
+
+Targets (issue "Maps that keep the layout"): standard edges per vertex <= 1.5, standard
+completeness and correctness >= 0.99; scene_integration and compact completeness and
+correctness >= 0.98; compact vertices <= 0.15 x standard; compact size change over laps 3-6
+within +-3 %; every map's ATE <= 0.5 x dead reckoning, compact and scene_integration ATE
+<= 1.2 x standard; precision >= 0.95; realtime factor >= 50.
+
+Usage: ``python benchmarks/map_layouts.py [--layouts a,b,...] [--radius 0.08] [--maps DIR]``
+(``--maps DIR`` also writes each layout's ``map.png``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.datasets import open_bag
+from cogmap_core.datasets.cache import DATASET_VERSION, cache_dir, default_dataset_path
+from cogmap_core.datasets.generator import MazeConfig, generate_maze_bag, plan_dataset
+from cogmap_core.datasets.profile import frontend_config_for
+from cogmap_core.event_file import EventRecording, load_event_file, save_event_file
+from cogmap_core.slam import EventLog, SlamSession
+
+LAYOUTS = ("irat_australia", "figure_eight", "long_corridors", "junction_dead_end")
+MODES = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+
+
+@dataclass
+class Dataset:
+    """A generated bag, its lap times and its cached front-end events."""
+
+    layout: str
+    bag: Path
+    lap_times: tuple[float, ...]
+    recording: EventRecording
+    frontend_s: float
+
+
+def bag_for(layout: str) -> Path:
+    """The 6-lap bag of a layout (the default dataset for the default layout)."""
+    if layout == "irat_australia":
+        return default_dataset_path()
+    path = cache_dir() / "bench" / f"{layout}_6laps_seed1_v{DATASET_VERSION}.bag"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        print(f"generating {path.name} ...", flush=True)
+        generate_maze_bag(path, MazeConfig(layout=layout))
+    return path
+
+
+def events_for(bag: Path) -> tuple[EventRecording, float]:
+    """The front end's events of a bag (cached beside it, keyed by the front-end settings)."""
+    frontend = frontend_config_for(bag)
+    key = hashlib.sha1(json.dumps(frontend.to_dict(), sort_keys=True).encode()).hexdigest()[:10]
+    path = bag.with_name(f"{bag.stem}.events-{key}.npz")
+    if path.exists():
+        recording = load_event_file(path)
+        return recording, float(recording.meta.get("frontend_wall_s", float("nan")))
+    session = SlamSession(frontend_config=frontend, modes=())
+    started = time.perf_counter()
+    with open_bag(bag, image_scale=4) as reader:
+        for frame in reader.frames():
+            session.process(frame)
+    wall = time.perf_counter() - started
+    recording = session.log.recording(str(bag), frontend.to_dict())
+    recording.meta["frontend_wall_s"] = wall
+    save_event_file(path, recording)
+    return recording, wall
+
+
+def load_dataset(layout: str) -> Dataset:
+    """Bag, lap times and events of one layout."""
+    bag = bag_for(layout)
+    recording, frontend_s = events_for(bag)
+    lap_times = plan_dataset(MazeConfig(layout=layout)).trajectory.lap_times
+    return Dataset(layout, bag, lap_times, recording, frontend_s)
+
+
+def evaluate(data: Dataset, params: MapParams, radius: float, maps_dir: Path | None) -> bool:
+    """Build the three maps of one dataset, print every figure and check the targets."""
+    log = EventLog.from_recording(data.recording)
+    duration = log.frame_time[-1] - log.frame_time[0]
+    dr_ate = log.dead_reckoning_ate()
+    score = log.loop_closure_score()
+    assert dr_ate is not None and score is not None
+    built: dict[MapMode, CognitiveMap] = {}
+    wall: dict[MapMode, float] = {}
+    for mode in MODES:
+        started = time.perf_counter()
+        cmap = CognitiveMap(mode, params)
+        cmap.apply_all(log.events)
+        cmap.finish(log.frame_time[-1])
+        wall[mode] = time.perf_counter() - started
+        built[mode] = cmap
+    print(
+        f"\n{data.layout}: {log.frames} frames, {duration:.0f} s of data, "
+        f"{len(data.lap_times) - 1} laps, dead-reckoning ATE {dr_ate:.4f} m, "
+        f"{score.total} loop closures, precision {score.precision:.4f} "
+        f"({score.false} false)"
+    )
+    print(
+        f"  {'map':18} {'V':>5} {'E':>5} {'loops':>5} {'E/V':>5} {'compl':>6} {'corr':>6} "
+        f"{'ATE m':>7} {'ATE/DR':>6} {'laps3-6':>8} {'raw':>8} {'expl':>4} {'opt':>4} "
+        f"{'map s':>6}"
+    )
+    figures: dict[MapMode, dict[str, float]] = {}
+    for mode in MODES:
+        cmap = built[mode]
+        fid = log.layout_fidelity(cmap, radius)
+        ate = log.map_ate(cmap)
+        assert fid is not None and ate is not None
+        growth = log.size_change(cmap, data.lap_times[2], data.lap_times[6], radius)
+        assert growth is not None
+        change = growth.change_without_exploration
+        figures[mode] = {
+            "V": cmap.num_vertices,
+            "E": cmap.num_edges,
+            "epv": fid.edges_per_vertex,
+            "compl": fid.completeness,
+            "corr": fid.correctness,
+            "ate": ate,
+            "change": change,
+            "raw_change": growth.change,
+            "explored": growth.exploration_vertices,
+        }
+        print(
+            f"  {mode.value:18} {cmap.num_vertices:5d} {cmap.num_edges:5d} "
+            f"{cmap.num_loop_edges:5d} {fid.edges_per_vertex:5.2f} {fid.completeness:6.3f} "
+            f"{fid.correctness:6.3f} {ate:7.4f} {ate / dr_ate:6.3f} {change:+8.1%} "
+            f"{growth.change:+8.1%} {growth.exploration_vertices:4d} "
+            f"{len(cmap.optimizations):4d} {wall[mode]:6.2f}"
+        )
+    std, si, cm = (figures[m] for m in MODES)
+    maps_rtf = duration / sum(wall.values())
+    pipeline_rtf = duration / (data.frontend_s + sum(wall.values()))
+    checks = [
+        ("standard edges per vertex <= 1.5", std["epv"] <= 1.5),
+        ("standard completeness, correctness >= 0.99", min(std["compl"], std["corr"]) >= 0.99),
+        (
+            "scene_integration completeness, correctness >= 0.98",
+            min(si["compl"], si["corr"]) >= 0.98,
+        ),
+        ("compact completeness, correctness >= 0.98", min(cm["compl"], cm["corr"]) >= 0.98),
+        ("compact vertices <= 0.15 x standard", cm["V"] <= 0.15 * std["V"]),
+        (
+            f"compact size change laps 3-6 within +-3 % on known ground "
+            f"(raw {cm['raw_change']:+.1%}, {cm['explored']} vertices on ground first explored)",
+            abs(cm["change"]) <= 0.03,
+        ),
+        (
+            "every map's ATE <= 0.5 x dead reckoning",
+            max(f["ate"] for f in figures.values()) <= 0.5 * dr_ate,
+        ),
+        (
+            "compact, scene_integration ATE <= 1.2 x standard",
+            max(si["ate"], cm["ate"]) <= 1.2 * std["ate"],
+        ),
+        ("loop-closure precision (position and heading) >= 0.95", (score.precision or 0) >= 0.95),
+        (
+            f"realtime factor >= 50 (pipeline {pipeline_rtf:.0f}x, maps {maps_rtf:.0f}x)",
+            pipeline_rtf >= 50,
+        ),
+    ]
+    for label, ok in checks:
+        print(f"    {'OK    ' if ok else 'MISSED'} {label}")
+    if maps_dir is not None:
+        from app.plots import map_figure, save_png
+
+        maps_dir.mkdir(parents=True, exist_ok=True)
+        snaps = {m.value: built[m].snapshot() for m in MODES}
+        aligned = {}
+        from cogmap_core.evaluation import align_rigid_2d
+
+        for m in MODES:
+            truth = log.vertex_ground_truth(built[m])
+            poses = snaps[m.value].poses.copy()
+            poses[:, :2] = align_rigid_2d(poses, truth).apply(poses[:, :2])
+            aligned[m.value] = poses
+        save_png(
+            map_figure(np.asarray(log.ground_truth), snaps, aligned),
+            maps_dir / f"{data.layout}_map.png",
+        )
+    return all(ok for _, ok in checks)
+
+
+def main() -> None:
+    """Run the benchmark."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--layouts", default=",".join(LAYOUTS), help="comma-separated layouts")
+    parser.add_argument("--radius", type=float, default=0.08, help="layout radius (m)")
+    parser.add_argument("--maps", type=Path, default=None, help="write <layout>_map.png here")
+    parser.add_argument(
+        "--param", action="append", default=[], metavar="NAME=VALUE", help="map parameter"
+    )
+    args = parser.parse_args()
+    changes = {k: float(v) for k, v in (p.split("=", 1) for p in args.param)}
+    params = MapParams().with_changes(**changes)
+    results = []
+    for layout in args.layouts.split(","):
+        results.append((layout, evaluate(load_dataset(layout), params, args.radius, args.maps)))
+    missed = [layout for layout, ok in results if not ok]
+    print(
+        f"\nmap layouts: {len(results) - len(missed)}/{len(results)} layouts meet every target"
+        + (f" (missed: {', '.join(missed)})" if missed else "")
+    )
+
+
+if __name__ == "__main__":
+    main()
