@@ -149,14 +149,10 @@ class EventLog:
             return None
         times, vertices, _ = cmap.size_history()
         snap = cmap.snapshot()
-        keep = snap.vertex_time <= end
-        truth = self.truth_at(snap.vertex_time[keep])
-        assert truth is not None
         return size_change(
             times,
             vertices,
-            snap.vertex_time[keep],
-            truth,
+            snap.vertex_time[snap.vertex_time <= end],
             np.asarray(self.frame_time),
             np.asarray(self.ground_truth),
             start,
