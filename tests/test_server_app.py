@@ -80,6 +80,9 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
         assert counter(app, "compact-clusters") == str(len(compact.clusters))
         assert counter(app, "compact-optimizations") == str(len(compact.optimizations))
         assert counter(app, "compact-ate") == f"{reference.ate(compact):.3f}"
+        fidelity = reference.layout_fidelity(compact)
+        assert counter(app, "compact-completeness") == f"{fidelity.completeness:.3f}"
+        assert counter(app, "compact-correctness") == f"{fidelity.correctness:.3f}"
         links = sum(1 for e in reference.log.events if type(e).__name__ == "LinkToVertex")
         assert counter(app, "loops-detected") == str(links)
         # the scene shows exactly the compact map's vertices and the whole ground truth

@@ -42,6 +42,7 @@ from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams, parameter_range
 from cogmap_core.datasets import BagTopics
 from cogmap_core.errors import CogmapError, ParameterError
+from cogmap_core.evaluation import LayoutFidelity
 from cogmap_core.events import LinkToVertex
 from cogmap_core.frames import Frame
 
@@ -162,6 +163,7 @@ class CogmapApp:
         self._chart_limit = _RateLimit(1.0)
         self._ate_limit = _RateLimit(1.0)
         self._ate: dict[MapMode, float | None] = {}
+        self._fidelity: dict[MapMode, LayoutFidelity | None] = {}
         self._log_key: tuple[Any, ...] | None = None
         self._links_counted = (0, 0)  # (events counted, LinkToVertex among them)
         self._suppress_param_events = False
@@ -575,6 +577,7 @@ class CogmapApp:
         modes = self.streamer.shown
         if self._ate_limit.due(forced):
             self._ate = {m: session.ate(session.maps[m]) for m in modes}
+            self._fidelity = {m: session.layout_fidelity(session.maps[m]) for m in modes}
         t = 0.0 if math.isnan(r.frame_time) else r.frame_time
         rows = [
             ("time", "time", f"{t:.1f} / {r.duration:.1f} s"),
@@ -587,7 +590,10 @@ class CogmapApp:
             for key, label, value in rows
         )
         per_map: list[tuple[str, str, list[str]]] = []
-        stats = [self._map_counts(session.maps[m], self._ate.get(m)) for m in modes]
+        stats = [
+            self._map_counts(session.maps[m], self._ate.get(m), self._fidelity.get(m))
+            for m in modes
+        ]
         for key, label in (
             ("vertices", "vertices"),
             ("edges", "edges"),
@@ -595,6 +601,8 @@ class CogmapApp:
             ("clusters", "clusters"),
             ("optimizations", "optimizations"),
             ("ate", "ATE (m)"),
+            ("completeness", "completeness (8 cm)"),
+            ("correctness", "correctness (8 cm)"),
         ):
             per_map.append((key, label, [s[key] for s in stats]))
         body += f"<tr><td></td>{head}</tr>"
@@ -613,7 +621,12 @@ class CogmapApp:
             self.counters_html.content = content
 
     @staticmethod
-    def _map_counts(cmap: CognitiveMap, ate: float | None) -> dict[str, str]:
+    def _map_counts(
+        cmap: CognitiveMap, ate: float | None, fidelity: LayoutFidelity | None
+    ) -> dict[str, str]:
+        def share(value: float | None) -> str:
+            return "–" if value is None or math.isnan(value) else f"{value:.3f}"
+
         return {
             "vertices": str(cmap.num_vertices),
             "edges": str(cmap.num_edges),
@@ -621,6 +634,8 @@ class CogmapApp:
             "clusters": str(len(cmap.clusters)),
             "optimizations": str(len(cmap.optimizations)),
             "ate": "–" if ate is None else f"{ate:.3f}",
+            "completeness": share(None if fidelity is None else fidelity.completeness),
+            "correctness": share(None if fidelity is None else fidelity.correctness),
         }
 
     def _update_chart(self) -> None:
