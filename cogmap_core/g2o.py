@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
 from cogmap_core.errors import G2oFormatError, InputFileError
+from cogmap_core.fileio import atomic_writer
 from cogmap_core.posegraph import PoseGraph
 
 _VERTEX_TAGS = {"VERTEX_SE2": "g2o", "VERTEX2": "toro"}
@@ -188,16 +188,19 @@ def format_g2o(graph: PoseGraph) -> Iterable[str]:
 
 
 def write_g2o(graph: PoseGraph, path: str | os.PathLike[str]) -> None:
-    """Write ``graph`` as g2o text, atomically (a reader never sees a half-written file)."""
+    """Write ``graph`` as g2o text, atomically (a reader never sees a half-written file).
+
+    The file gets the user's normal permissions (0666 minus the umask).
+
+    Raises:
+        InputFileError: the folder does not exist.
+        OSError: the file cannot be written (full disk, read-only folder...); ``path`` is then
+            left as it was.
+
+    """
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise InputFileError(f"{path}: directory {directory} does not exist; create it first")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.writelines(format_g2o(graph))
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
+    with atomic_writer(path) as handle:
+        handle.writelines(format_g2o(graph))
