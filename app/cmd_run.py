@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from app.cli_common import (
@@ -28,8 +29,13 @@ def _run(args: argparse.Namespace) -> int:
         force=args.force,
     )
     bar = ProgressBar("cogmap run")
+
+    def announce(message: str) -> None:
+        bar.close()
+        print(f"cogmap run: {message}", file=sys.stderr, flush=True)
+
     try:
-        result = run_headless(bag, Path(args.out), options, bar)
+        result = run_headless(bag, Path(args.out), options, bar, announce)
     finally:
         bar.close()
     print(result.table())
@@ -49,7 +55,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("bag", nargs="?", default=None, metavar="BAG", help="iRat-layout ROS bag")
     parser.add_argument("--out", required=True, metavar="DIR", help="report folder")
-    parser.add_argument("--force", action="store_true", help="overwrite a non-empty DIR")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a non-empty DIR: replaces only the report's own files (listed in "
+        "DIR/.cogmap-report), once the new report is complete; nothing else in DIR is touched",
+    )
     add_map_arguments(parser)
     add_frontend_arguments(parser)
     add_topic_arguments(parser)
