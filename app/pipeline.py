@@ -53,6 +53,8 @@ class RunOptions:
     topics: BagTopics | None = None
     image_scale: int = 4
     force: bool = False
+    on_clock_jump: str = "drop"  # or "stop": see cogmap_core.datasets.rosbag_reader
+    until_error: bool = False  # a bag corrupt part-way: map what comes before the damage
 
 
 @dataclass
@@ -62,6 +64,7 @@ class RunResult:
     summary: dict[str, Any]
     out_dir: Path
     files: list[Path]
+    warnings: list[str] = field(default_factory=list)  # the reader's, one line each
 
     def table(self) -> str:
         """A compact one-line-per-map summary table."""
@@ -191,7 +194,7 @@ class HeadlessPipeline:
     def run(self) -> RunResult:
         """Open the bag, check the output, process every frame, evaluate, write the report."""
         with (
-            open_bag(self.bag, self.options.topics, image_scale=self.options.image_scale) as reader,
+            self._open_bag() as reader,
             ReportFolder(self.out_dir, REPORT_FILES, self.options.force) as report,
         ):
             started = wallclock.perf_counter()
@@ -208,18 +211,43 @@ class HeadlessPipeline:
                 self._write_trajectories(report)
                 self._write_figures(report, last)
             self.files = report.commit()
-        return RunResult(summary, report.out_dir, list(self.files))
+        return RunResult(summary, report.out_dir, list(self.files), reader.warnings)
 
     # ------------------------------------------------------------------ steps
     def _announce(self, message: str) -> None:
         if self.announce is not None:
             self.announce(message)
 
+    def _open_bag(self) -> BagReader:
+        o = self.options
+        return open_bag(
+            self.bag,
+            o.topics,
+            image_scale=o.image_scale,
+            on_clock_jump=o.on_clock_jump,
+            on_corrupt="stop" if o.until_error else "error",
+        )
+
+    def _check_image_size(self, image: np.ndarray) -> None:
+        """Refuse camera images too small for the view template (they would be magnified)."""
+        min_w, min_h = self.frontend.minimum_image_size()
+        height, width = image.shape[:2]
+        if width < min_w or height < min_h:
+            scale = self.options.image_scale
+            need_w, need_h = self.frontend.minimum_image_size(scale)
+            cfg = self.frontend
+            raise InputFileError(
+                f"{self.bag}: camera images of about {width * scale}x{height * scale} px are too "
+                f"small for the {cfg.template_x_size}x{cfg.template_y_size} view template; "
+                f"use a camera topic with images of at least {need_w}x{need_h} px"
+            )
+
     def _process_frames(self, reader: BagReader) -> tuple[float, float]:
         first = last = math.nan
         total = reader.info.frame_count
         for frame in reader.frames():
             if math.isnan(first):
+                self._check_image_size(frame.image)
                 first = frame.time
             last = frame.time
             self.session.process(frame)
