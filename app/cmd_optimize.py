@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,6 +12,11 @@ from cogmap_core.errors import InputFileError, OutputError
 from cogmap_core.fileio import check_writable, output_error
 from cogmap_core.g2o import read_g2o, write_g2o
 from cogmap_core.optimizer import OptimizationResult, OptimizerOptions, optimize_pose_graph
+
+
+def _finite_or_none(value: float) -> float | None:
+    """JSON has no infinity: an overflowing cost is written as null."""
+    return value if math.isfinite(value) else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,8 +36,8 @@ class OptimizeReport:
             {
                 "vertices": self.vertices,
                 "edges": self.edges,
-                "initial_cost": self.initial_cost,
-                "final_cost": self.final_cost,
+                "initial_cost": _finite_or_none(self.initial_cost),
+                "final_cost": _finite_or_none(self.final_cost),
                 "iterations": self.iterations,
                 "wall_s": round(self.wall_s, 6),
             }
