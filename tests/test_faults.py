@@ -388,3 +388,71 @@ def test_optimize_checks_the_output_folder_before_optimising(
     monkeypatch.setattr(app.cmd_optimize, "check_writable", read_only)
     assert main(["optimize", str(data_dir / "MIT.g2o"), str(out)]) == 2
     assert f"cannot write in {tmp_path}" in one_line_error(capsys.readouterr().err)
+
+
+# ------------------------------------------------------------------------------- signals
+def test_sigterm_in_the_write_phase_is_a_clean_termination(bag: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    old = old_report(bag, out)
+    proc = _run_paused_in_the_write_phase(bag, out, ["--force"])
+    try:
+        _wait_for_line(proc, "wrote ")
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143
+    assert err.rstrip().endswith("cogmap run: terminated")
+    assert "SIGTERM" not in err and "stack trace" not in err and "Traceback" not in err
+    assert snapshot(out) == old
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_sigterm_after_importing_ceres_prints_no_crash_report() -> None:
+    script = (
+        "import os, signal, time\n"
+        "import cogmap_core.optimizer\n"
+        "os.kill(os.getpid(), signal.SIGTERM)\n"
+        "time.sleep(10)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == -signal.SIGTERM
+    assert done.stderr == ""  # glog's handler printed "*** SIGTERM received ... stack trace"
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie waiting for its reaper counts as gone)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, IndexError):
+        return False
+    return state != "Z"
+
+
+def test_rendering_workers_exit_when_their_parent_is_killed(tmp_path: Path) -> None:
+    script = (
+        "import multiprocessing, sys, time\n"
+        "from cogmap_core.datasets.generator import MazeConfig, plan_dataset, render_frames\n"
+        "plan = plan_dataset(MazeConfig(layout='figure_eight', laps=1, fps=3.0))\n"
+        "used, frames = render_frames(plan, workers=2, min_frames_per_worker=1)\n"
+        "next(frames)\n"
+        "print(' '.join(str(p.pid) for p in multiprocessing.active_children()), flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout is not None
+        workers = [int(p) for p in proc.stdout.readline().split()]
+        assert len(workers) >= 2 and all(_alive(p) for p in workers)
+        proc.kill()  # SIGKILL: the pool cannot be shut down
+        proc.wait(timeout=30)
+        deadline = time.monotonic() + 20
+        while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(p) for p in workers)
+    finally:
+        proc.kill()
