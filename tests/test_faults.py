@@ -456,3 +456,30 @@ def test_rendering_workers_exit_when_their_parent_is_killed(tmp_path: Path) -> N
         assert not any(_alive(p) for p in workers)
     finally:
         proc.kill()
+
+
+def test_ctrl_c_while_moving_the_report_into_place_is_held_back(
+    bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    out = tmp_path / "out"
+    old = old_report(bag, out)
+    real_replace = os.replace
+    moved: list[str] = []
+
+    def replace(src: object, dst: object) -> None:
+        if Path(str(dst)).parent == out:  # the commit moving staged files into out
+            moved.append(Path(str(dst)).name)
+            if len(moved) == 3:
+                os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C half way through the move
+        real_replace(src, dst)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(os, "replace", replace)
+    capsys.readouterr()
+    assert main(["run", str(bag), "--out", str(out), "--force", "--delta", "6"]) == 130
+    assert capsys.readouterr().err.rstrip().endswith("cogmap run: interrupted")
+    after = snapshot(out)
+    assert set(after) == REPORT and len(moved) == len(REPORT)  # every file, marker last
+    assert moved[-1] == MARKER
+    assert json.loads(after["summary.json"])["params"]["delta"] == 6.0  # type: ignore[arg-type]
+    assert after["summary.json"] != old["summary.json"]
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
