@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from app.cli_common import (
@@ -26,13 +27,22 @@ def _run(args: argparse.Namespace) -> int:
         frontend=frontend_from_args(args, bag),
         topics=topics_from_args(args),
         force=args.force,
+        on_clock_jump=args.on_clock_jump,
+        until_error=args.until_error,
     )
     bar = ProgressBar("cogmap run")
+
+    def announce(message: str) -> None:
+        bar.close()
+        print(f"cogmap run: {message}", file=sys.stderr, flush=True)
+
     try:
-        result = run_headless(bag, Path(args.out), options, bar)
+        result = run_headless(bag, Path(args.out), options, bar, announce)
     finally:
         bar.close()
     print(result.table())
+    for line in result.warnings:
+        print(f"warning: {line}")
     print(f"report written to {result.out_dir}")
     return 0
 
@@ -49,7 +59,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("bag", nargs="?", default=None, metavar="BAG", help="iRat-layout ROS bag")
     parser.add_argument("--out", required=True, metavar="DIR", help="report folder")
-    parser.add_argument("--force", action="store_true", help="overwrite a non-empty DIR")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a non-empty DIR: replaces only the report's own files (listed in "
+        "DIR/.cogmap-report), once the new report is complete; nothing else in DIR is touched",
+    )
+    parser.add_argument(
+        "--on-clock-jump",
+        choices=("drop", "stop"),
+        default="drop",
+        help="where the bag's clock jumps back: drop the messages recorded again over the same "
+        "time (default) or stop reading at the jump; either way it is reported",
+    )
+    parser.add_argument(
+        "--until-error",
+        action="store_true",
+        help="a bag corrupt part-way: map the data before the damage and write the report "
+        "(the damage is reported) instead of failing",
+    )
     add_map_arguments(parser)
     add_frontend_arguments(parser)
     add_topic_arguments(parser)

@@ -9,8 +9,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
-import shutil
 import time as wallclock
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
@@ -20,6 +18,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from app.plots import map_figure, save_png, size_figure
+from app.report import ReportFolder
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagReader, BagTopics, open_bag
@@ -36,6 +35,17 @@ from cogmap_core.g2o import write_g2o
 from cogmap_core.slam import SlamSession, optimisation_summary
 
 MAP_ORDER: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+#: Every file a report folder can hold (``--force`` replaces only these, see app/report.py).
+REPORT_FILES: tuple[str, ...] = (
+    "config.json",
+    "summary.json",
+    "sizes.csv",
+    *(f"{m.value}.g2o" for m in MAP_ORDER),
+    "trajectory_tum.txt",
+    "groundtruth_tum.txt",
+    "size.png",
+    "map.png",
+)
 ProgressCallback = Callable[[int, int, float], None]
 
 
@@ -48,6 +58,8 @@ class RunOptions:
     topics: BagTopics | None = None
     image_scale: int = 4
     force: bool = False
+    on_clock_jump: str = "drop"  # or "stop": see cogmap_core.datasets.rosbag_reader
+    until_error: bool = False  # a bag corrupt part-way: map what comes before the damage
 
 
 @dataclass
@@ -57,6 +69,7 @@ class RunResult:
     summary: dict[str, Any]
     out_dir: Path
     files: list[Path]
+    warnings: list[str] = field(default_factory=list)  # the reader's, one line each
 
     def table(self) -> str:
         """A compact one-line-per-map summary table."""
@@ -92,23 +105,6 @@ class RunResult:
             f"(precision {precision}, position and heading)"
         )
         return "\n".join(lines)
-
-
-def prepare_out_dir(out_dir: Path, force: bool) -> None:
-    """Create ``out_dir``; refuse an existing non-empty one unless ``force``."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputFileError(f"{out_dir} exists and is not a directory; choose another --out")
-    if out_dir.is_dir() and any(out_dir.iterdir()):
-        if not force:
-            raise InputFileError(
-                f"{out_dir} is not empty; choose another --out or pass --force to overwrite it"
-            )
-        for child in out_dir.iterdir():
-            if child.is_dir() and not child.is_symlink():
-                shutil.rmtree(child)
-            else:
-                child.unlink()
-    out_dir.mkdir(parents=True, exist_ok=True)
 
 
 def session_summary(
@@ -229,7 +225,11 @@ def write_sizes_csv(maps: Mapping[MapMode, CognitiveMap], handle: TextIO) -> Non
 
 
 class HeadlessPipeline:
-    """Process a whole bag once and write the report folder."""
+    """Process a whole bag once and write the report folder.
+
+    The report is staged and moved into place only when complete (:class:`app.report.ReportFolder`):
+    an error, a full disk or Ctrl-C at any point leaves ``out_dir`` as it was.
+    """
 
     def __init__(
         self,
@@ -237,39 +237,75 @@ class HeadlessPipeline:
         out_dir: Path,
         options: RunOptions | None = None,
         progress: ProgressCallback | None = None,
+        announce: Callable[[str], None] | None = None,
     ) -> None:
-        """Set up a run of ``bag`` into ``out_dir``."""
+        """Set up a run of ``bag`` into ``out_dir``; ``announce`` is told when writing starts."""
         self.bag = Path(bag)
         self.out_dir = Path(out_dir)
         self.options = options or RunOptions()
         self.progress = progress
+        self.announce = announce
         self.frontend = self.options.frontend or frontend_config_for(self.bag)
         self.session = SlamSession(self.options.params, self.frontend)
         self.files: list[Path] = []
 
     def run(self) -> RunResult:
-        """Open the bag, process every frame, finish the maps, evaluate, write the report."""
-        reader = open_bag(self.bag, self.options.topics, image_scale=self.options.image_scale)
-        prepare_out_dir(self.out_dir, self.options.force)
-        started = wallclock.perf_counter()
-        first, last = self._process_frames(reader)
-        self.session.finish()
-        wall = wallclock.perf_counter() - started
-        summary = self._summary(reader, first, last, wall)
-        self._write_config()
-        self._write_summary(summary)
-        self._write_sizes()
-        self._write_maps()
-        self._write_trajectories()
-        self._write_figures(last, summary)
-        return RunResult(summary, self.out_dir, list(self.files))
+        """Open the bag, check the output, process every frame, evaluate, write the report."""
+        with (
+            self._open_bag() as reader,
+            ReportFolder(self.out_dir, REPORT_FILES, self.options.force) as report,
+        ):
+            started = wallclock.perf_counter()
+            first, last = self._process_frames(reader)
+            self.session.finish()
+            wall = wallclock.perf_counter() - started
+            summary = self._summary(reader, first, last, wall)
+            self._announce(f"writing the report to {report.out_dir}")
+            with report.writing():
+                self._write_config(report)
+                self._write_summary(report, summary)
+                self._write_sizes(report)
+                self._write_maps(report)
+                self._write_trajectories(report)
+                self._write_figures(report, last, summary)
+            self.files = report.commit()
+        return RunResult(summary, report.out_dir, list(self.files), reader.warnings)
 
     # ------------------------------------------------------------------ steps
+    def _announce(self, message: str) -> None:
+        if self.announce is not None:
+            self.announce(message)
+
+    def _open_bag(self) -> BagReader:
+        o = self.options
+        return open_bag(
+            self.bag,
+            o.topics,
+            image_scale=o.image_scale,
+            on_clock_jump=o.on_clock_jump,
+            on_corrupt="stop" if o.until_error else "error",
+        )
+
+    def _check_image_size(self, image: np.ndarray) -> None:
+        """Refuse camera images too small for the view template (they would be magnified)."""
+        min_w, min_h = self.frontend.minimum_image_size()
+        height, width = image.shape[:2]
+        if width < min_w or height < min_h:
+            scale = self.options.image_scale
+            need_w, need_h = self.frontend.minimum_image_size(scale)
+            cfg = self.frontend
+            raise InputFileError(
+                f"{self.bag}: camera images of about {width * scale}x{height * scale} px are too "
+                f"small for the {cfg.template_x_size}x{cfg.template_y_size} view template; "
+                f"use a camera topic with images of at least {need_w}x{need_h} px"
+            )
+
     def _process_frames(self, reader: BagReader) -> tuple[float, float]:
         first = last = math.nan
         total = reader.info.frame_count
         for frame in reader.frames():
             if math.isnan(first):
+                self._check_image_size(frame.image)
                 first = frame.time
             last = frame.time
             self.session.process(frame)
@@ -284,15 +320,13 @@ class HeadlessPipeline:
         warnings = {k: v for k, v in asdict(self.counters).items() if k != "frames" and v}
         return session_summary(self.session, str(self.bag), first, last, wall, warnings)
 
-    def _write_json(self, name: str, payload: dict[str, Any]) -> None:
-        path = self.out_dir / name
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(payload, indent=2) + "\n")
-        os.replace(tmp, path)
-        self.files.append(path)
+    @staticmethod
+    def _write_json(report: ReportFolder, name: str, payload: dict[str, Any]) -> None:
+        report.write_text(name, json.dumps(payload, indent=2) + "\n")
 
-    def _write_config(self) -> None:
+    def _write_config(self, report: ReportFolder) -> None:
         self._write_json(
+            report,
             "config.json",
             {
                 "dataset": str(self.bag),
@@ -303,45 +337,42 @@ class HeadlessPipeline:
             },
         )
 
-    def _write_summary(self, summary: dict[str, Any]) -> None:
-        self._write_json("summary.json", summary)
+    def _write_summary(self, report: ReportFolder, summary: dict[str, Any]) -> None:
+        self._write_json(report, "summary.json", summary)
 
-    def _write_sizes(self) -> None:
+    def _write_sizes(self, report: ReportFolder) -> None:
         """sizes.csv: time and the vertices/edges of each map, on the union of change times."""
-        path = self.out_dir / "sizes.csv"
-        with path.open("w", newline="") as handle:
+        with report.open("sizes.csv", newline="") as handle:
             write_sizes_csv(self.session.maps.maps, handle)
-        self.files.append(path)
 
-    def _write_maps(self) -> None:
+    def _write_maps(self, report: ReportFolder) -> None:
         for mode in MAP_ORDER:
-            path = self.out_dir / f"{mode.value}.g2o"
-            write_g2o(self.session.maps[mode].to_pose_graph(), path)
-            self.files.append(path)
+            write_g2o(self.session.maps[mode].to_pose_graph(), report.path(f"{mode.value}.g2o"))
 
-    def _write_trajectories(self) -> None:
+    def _write_trajectories(self, report: ReportFolder) -> None:
         """TUM files for evo: the standard map's vertices, and the ground truth when known."""
         standard = self.session.maps[MapMode.STANDARD].snapshot()
         order = np.argsort(standard.vertex_time, kind="stable")
-        self._write_tum("trajectory_tum.txt", standard.vertex_time[order], standard.poses[order])
+        times = standard.vertex_time[order]
+        self._write_tum(report, "trajectory_tum.txt", times, standard.poses[order])
         truth = self.session.vertex_ground_truth(self.session.maps[MapMode.STANDARD])
         if truth is not None:
-            self._write_tum("groundtruth_tum.txt", standard.vertex_time[order], truth[order])
+            self._write_tum(report, "groundtruth_tum.txt", times, truth[order])
 
-    def _write_tum(self, name: str, times: np.ndarray, poses: np.ndarray) -> None:
-        path = self.out_dir / name
-        with path.open("w") as handle:
+    @staticmethod
+    def _write_tum(report: ReportFolder, name: str, times: np.ndarray, poses: np.ndarray) -> None:
+        with report.open(name) as handle:
             handle.write("# timestamp tx ty tz qx qy qz qw\n")
             for t, (x, y, th) in zip(times.tolist(), poses.tolist(), strict=True):
                 handle.write(
                     f"{t:.6f} {x:.6f} {y:.6f} 0 0 0 {math.sin(th / 2):.9f} {math.cos(th / 2):.9f}\n"
                 )
-        self.files.append(path)
 
-    def _write_figures(self, end_time: float, summary: dict[str, Any]) -> None:
+    def _write_figures(
+        self, report: ReportFolder, end_time: float, summary: dict[str, Any]
+    ) -> None:
         histories = {m.value: self.session.maps[m].size_history() for m in MAP_ORDER}
-        save_png(size_figure(histories, end_time), self.out_dir / "size.png")
-        self.files.append(self.out_dir / "size.png")
+        save_png(size_figure(histories, end_time), report.path("size.png"))
         snaps = {m.value: self.session.maps[m].snapshot() for m in MAP_ORDER}
         aligned: dict[str, np.ndarray] = {}
         truth_path = None
@@ -363,16 +394,22 @@ class HeadlessPipeline:
                     f"ATE {entry['ate_m']:.3f} m, completeness {entry['completeness']:.3f}, "
                     f"correctness {entry['correctness']:.3f}"
                 )
-        save_png(map_figure(truth_path, snaps, aligned, notes), self.out_dir / "map.png")
-        self.files.append(self.out_dir / "map.png")
+        save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
 
 
 def run_headless(
-    bag: Path, out_dir: Path, options: RunOptions, progress: ProgressCallback | None = None
+    bag: Path,
+    out_dir: Path,
+    options: RunOptions,
+    progress: ProgressCallback | None = None,
+    announce: Callable[[str], None] | None = None,
 ) -> RunResult:
-    """Library entry of ``cogmap run``: process ``bag`` and write the report into ``out_dir``."""
+    """Library entry of ``cogmap run``: process ``bag`` and write the report into ``out_dir``.
+
+    ``announce`` receives one-line notes of what is happening (e.g. that writing has started).
+    """
     try:
-        return HeadlessPipeline(bag, out_dir, options, progress).run()
+        return HeadlessPipeline(bag, out_dir, options, progress, announce).run()
     except CogmapError:
         raise
     except MemoryError:

@@ -13,6 +13,7 @@ client joining late is sent the current state by viser.
 from __future__ import annotations
 
 import html
+import logging
 import math
 import threading
 import time
@@ -38,6 +39,7 @@ from app.server.scene import (
     SceneStreamer,
     cluster_color,
 )
+from app.server.validation import GuiGate, boolean, choice, click, number, text
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams, parameter_range
 from cogmap_core.datasets import BagTopics
@@ -45,6 +47,8 @@ from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.evaluation import LayoutFidelity
 from cogmap_core.events import LinkToVertex
 from cogmap_core.frames import Frame
+
+log = logging.getLogger(__name__)
 
 MODE_LABELS: dict[str, MapMode] = {m.value: m for m in MapMode}
 SPEEDS: dict[str, float] = {
@@ -104,6 +108,10 @@ def clamp_to_slider(spec: SliderSpec, value: float) -> float | None:
     if not math.isfinite(v):
         return None
     return min(max(v, spec.low), spec.high)
+
+
+def _log_refusal(message: str) -> None:
+    log.warning("GUI value from a client %s", message)
 
 
 class _RateLimit:
@@ -183,6 +191,7 @@ class CogmapApp:
         )
         self.streamer = SceneStreamer(server)
         self._build_gui(params or MapParams(), speed, autoplay)
+        self._guard_inputs()
         self._apply_view()
 
     # ================================================================== lifecycle
@@ -303,6 +312,38 @@ class CogmapApp:
         self.sizes_button.on_click(lambda event: self._download(event.client, "sizes"))
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
+    def _guard_inputs(self) -> None:
+        """Check every value a client can send before viser applies it (see validation.py)."""
+        gate = self.gate = GuiGate(self.server, note=_log_refusal)
+        maps = tuple(MODE_LABELS)
+        gate.guard(self.mode_dropdown, choice(maps))
+        gate.guard(self.compare_dropdown, choice(maps))
+        gate.guard(self.speed_dropdown, choice(tuple(SPEEDS)))
+        gate.guard(self.compare_checkbox, boolean())
+        gate.guard(self.truth_checkbox, boolean())
+        for button in (
+            self.top_button,
+            self.view3d_button,
+            self.play_button,
+            self.step_button,
+            self.restart_button,
+            self.reset_button,
+            self.g2o_button,
+            self.summary_button,
+            self.sizes_button,
+            self.replay_button,
+        ):
+            gate.guard(button, click())
+        gate.guard(self.seek_slider, number(0.0, lambda: float(self.seek_slider.max)))
+        for spec in SLIDERS + ADVANCED_SLIDERS:
+            gate.guard(
+                self.param_sliders[spec.name], number(spec.low, spec.high), note=self._param_note
+            )
+        gate.guard(self.replay_path, text())
+
+    def _param_note(self, message: str) -> None:
+        self.params_md.content = message
+
     def _add_param_slider(self, spec: SliderSpec, params: MapParams) -> None:
         value = clamp_to_slider(spec, getattr(params, spec.name))
         slider = self.server.gui.add_slider(
@@ -320,9 +361,9 @@ class CogmapApp:
     @property
     def shown_modes(self) -> tuple[MapMode, ...]:
         """The displayed map and, side by side, the compared one."""
-        first = MODE_LABELS[self.mode_dropdown.value]
+        first = MODE_LABELS.get(self.mode_dropdown.value, MapMode.COMPACT)
         if self.compare_checkbox.value:
-            second = MODE_LABELS[self.compare_dropdown.value]
+            second = MODE_LABELS.get(self.compare_dropdown.value, MapMode.STANDARD)
             if second is not first:
                 return (first, second)
         return (first,)

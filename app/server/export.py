@@ -13,9 +13,7 @@ import contextlib
 import io
 import json
 import math
-import os
 import socket
-import tempfile
 from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -30,6 +28,7 @@ from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
 from cogmap_core.events import LinkToVertex, MapEvent, Odometry
+from cogmap_core.fileio import check_writable, output_error, write_text_atomic
 from cogmap_core.g2o import format_g2o
 from cogmap_core.slam import EventLog, SlamSession
 
@@ -190,8 +189,12 @@ def save_html_replay(
 ) -> Path:
     """Write the HTML replay of ``replay`` up to its current frame to ``path`` (atomically).
 
+    The folder is checked writable before the page is rendered; the file gets the user's
+    normal permissions, and a failed write leaves an existing file as it was.
+
     Raises:
-        InputFileError: ``path`` does not end in ``.html`` or its folder cannot be made.
+        InputFileError: ``path`` does not end in ``.html``, or is something else than a replay.
+        OutputError: the folder cannot be made or written, or the disk is full.
 
     """
     path = Path(path)
@@ -207,17 +210,14 @@ def save_html_replay(
         finish = replay.at_end
     if log.frames == 0:
         raise InputFileError("nothing replayed yet: play some frames before saving a replay")
+    try:  # before the (long) rendering: a folder we cannot write costs nothing
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(path.parent, exc, "create") from None
+    check_writable(path.parent)
     page = html_replay(log, params, modes, finish, keyframes, seconds)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        write_text_atomic(path, page)
     except OSError as exc:
-        raise InputFileError(f"cannot write {path}: {exc.strerror}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(page)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        raise output_error(path, exc) from None
     return path

@@ -14,8 +14,11 @@ from __future__ import annotations
 import contextlib
 import math
 import multiprocessing
+import multiprocessing.connection
 import os
+import signal
 import sys
+import threading
 import time
 import types
 from collections.abc import Callable, Generator, Iterator, Sequence
@@ -239,9 +242,28 @@ class GenerationError(CogmapError):
 _WORKER: dict[str, object] = {}
 
 
+def _exit_with_parent() -> None:
+    """In a rendering process: exit as soon as the parent process is gone.
+
+    A parent killed with SIGKILL cannot stop its pool, and the workers would wait forever for
+    tasks (each holding ~100 MB); a daemon thread watches the parent's sentinel instead.
+    """
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        multiprocessing.connection.wait([parent.sentinel])
+        os._exit(1)
+
+    threading.Thread(target=watch, name="cogmap-parent-watch", daemon=True).start()
+
+
 def _init_worker(
     layout_text: str, name: str, cell: float, camera: CameraModel, settings: tuple[int, float, int]
 ) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _exit_with_parent()
     layout = parse_layout(layout_text, name=name, cell=cell)
     _WORKER["renderer"] = MazeRenderer(layout, camera)
     _WORKER["settings"] = settings

@@ -373,8 +373,13 @@ class _AreaPlan:
         sx = width / config.reference_image_width
         y0, y1 = config.image_crop_y_min * sy, config.image_crop_y_max * sy
         x0, x1 = config.image_crop_x_min * sx, config.image_crop_x_max * sx
-        if y1 - y0 < 1.0 or x1 - x0 < 1.0:
-            raise InputFileError(f"camera image of shape {tuple(shape)} is too small to crop")
+        if y1 - y0 < out_y - 1e-9 or x1 - x0 < out_x - 1e-9:
+            min_w, min_h = config.minimum_image_size()
+            raise InputFileError(
+                f"camera images of {width}x{height} px (as decoded) are too small for the "
+                f"{out_x}x{out_y} view template: their crop is {x1 - x0:.4g}x{y1 - y0:.4g} px; "
+                f"images must be at least {min_w}x{min_h} px as decoded"
+            )
         self.rows = min(height, math.ceil(y1 - 1e-9))
         self.cols = min(width, math.ceil(x1 - 1e-9))
         ys = np.linspace(y0, y1, out_y + 1)
