@@ -33,6 +33,7 @@ from app.server.export import (
     sizes_csv_bytes,
     summary_bytes,
 )
+from app.server.rebuild import make_builder
 from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
 from app.server.scene import (
     MAP_COLORS,
@@ -142,6 +143,8 @@ class CogmapApp:
         scene_hz: maximum map updates per second during playback.
         image_scale: JPEG decode reduction (1, 2, 4, 8).
         topics: the bag's topic names.
+        rebuild_workers: worker processes that rebuild maps after a parameter change
+            (:mod:`app.server.rebuild`; 0: on the replay's thread).
 
     """
 
@@ -157,6 +160,7 @@ class CogmapApp:
         scene_hz: float = 10.0,
         image_scale: int = 4,
         topics: BagTopics | None = None,
+        rebuild_workers: int = 2,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
         for spec in SLIDERS + ADVANCED_SLIDERS:
@@ -188,6 +192,7 @@ class CogmapApp:
             autoplay=autoplay,
             image_scale=image_scale,
             topics=topics,
+            builder=make_builder(rebuild_workers),
         )
         self.streamer = SceneStreamer(server)
         self._build_gui(params or MapParams(), speed, autoplay)
