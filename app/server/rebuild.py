@@ -22,9 +22,13 @@ result -- every map is exactly what ``CognitiveMap(mode, params)`` fed the same 
 
 from __future__ import annotations
 
-import multiprocessing
+import atexit
 import multiprocessing.connection
+import os
 import pickle
+import signal
+import socket
+import subprocess
 import sys
 import threading
 import time
@@ -295,9 +299,19 @@ class ThreadBuilder:
         """Nothing to stop."""
 
 
-def _worker_main(conn: multiprocessing.connection.Connection, cancel: Any) -> None:
-    """A rebuild worker: holds a copy of the event log and builds maps on request."""
+def _worker_main(conn: multiprocessing.connection.Connection) -> None:
+    """A rebuild worker: holds a copy of the event log and builds maps on request.
+
+    While it builds, a ``("cancel",)`` message makes it drop the build (checked between chunks).
+    """
     log = EventLog()
+
+    def cancelled() -> bool:
+        if conn.poll(0):
+            message = conn.recv()
+            return bool(message[0] == "cancel")
+        return False
+
     while True:
         try:
             message = conn.recv()
@@ -314,10 +328,10 @@ def _worker_main(conn: multiprocessing.connection.Connection, cancel: Any) -> No
             log.frame_end.extend(frame_end)
             log.frame_time.extend(frame_time)
         elif kind == "build":
-            _, task_id, task, generation = message
+            _, task_id, task = message
             started = time.perf_counter()
             try:
-                cmap = build_map(log, task, lambda g=generation: cancel.value != g)
+                cmap = build_map(log, task, cancelled)
             except Abandoned:
                 conn.send(("abandoned", task_id))
                 continue
@@ -326,75 +340,138 @@ def _worker_main(conn: multiprocessing.connection.Connection, cancel: Any) -> No
                 continue
             payload = pickle.dumps(cmap, protocol=pickle.HIGHEST_PROTOCOL)
             conn.send(("done", task_id, payload, time.perf_counter() - started))
+        # ("cancel",) arriving while idle: the build it meant is over already
 
 
 class _Worker:
-    def __init__(self, context: Any, cancel: Any) -> None:
-        self.conn, child = context.Pipe()
-        self.process = context.Process(
-            target=_worker_main, args=(child, cancel), name="cogmap-rebuild", daemon=True
+    """One worker process (``python -m app.server.rebuild``) and the log it holds."""
+
+    def __init__(self) -> None:
+        parent, child = socket.socketpair()
+        env = dict(os.environ)
+        paths = [p for p in sys.path if p]
+        env["PYTHONPATH"] = os.pathsep.join(paths)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "app.server.rebuild", str(child.fileno())],
+            pass_fds=[child.fileno()],
+            stdin=subprocess.DEVNULL,
+            env=env,
         )
-        self.process.start()
         child.close()
-        self.events = 0  # events of the log sent so far
+        self.conn = multiprocessing.connection.Connection(parent.detach())
+        self.log: EventLog | None = None  # the log whose events it holds
+        self.events = 0  # events of that log sent so far
         self.frames = 0
         self.busy: int | None = None  # task id in flight
+
+    @property
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def stop(self) -> None:
+        try:
+            self.conn.send(("stop",))
+        except (OSError, ValueError):
+            pass
+        try:
+            self.process.wait(2.0)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait(2.0)
+        self.conn.close()
+
+
+class WorkerPool:
+    """Rebuild worker processes, started once per process and shared by every builder."""
+
+    def __init__(self, size: int) -> None:
+        """Start ``size`` workers in the background (the first build waits for them)."""
+        self.size = size
+        self.workers: list[_Worker] = []
+        self.failed: str | None = None
+        self.lock = threading.Lock()  # one build at a time
+        self._ready = threading.Event()
+        threading.Thread(target=self._start, name="cogmap-rebuild-start", daemon=True).start()
+
+    def _start(self) -> None:
+        try:
+            self.workers = [_Worker() for _ in range(self.size)]
+        except Exception as exc:  # no worker processes: builds run on the calling thread
+            self.failed = f"{type(exc).__name__}: {exc}"
+            print(f"cogmap serve: rebuild workers unavailable ({self.failed})", file=sys.stderr)
+        finally:
+            self._ready.set()
+
+    @property
+    def ready(self) -> bool:
+        """Whether the workers were started (successfully or not)."""
+        return self._ready.is_set()
+
+    def available(self) -> bool:
+        """Whether the workers run (waits for them to start)."""
+        self._ready.wait()
+        return self.failed is None and bool(self.workers) and all(w.alive for w in self.workers)
+
+    def close(self) -> None:
+        """Stop the workers."""
+        self._ready.wait()
+        for worker in self.workers:
+            worker.stop()
+        self.workers = []
+
+
+_POOL: WorkerPool | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def worker_pool(size: int) -> WorkerPool:
+    """The process's pool of at least ``size`` rebuild workers (started on first use)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL.size < size or (_POOL.ready and not _POOL.available()):
+            if _POOL is not None:
+                _POOL.close()
+            _POOL = WorkerPool(size)
+            atexit.register(_POOL.close)
+        return _POOL
 
 
 class ProcessBuilder:
     """Builds maps in worker processes, at most one map per worker at a time (module doc).
 
     Args:
-        workers: number of worker processes (the machine's cores, for a start).
+        workers: worker processes to use (the machine's cores, for a start).
 
     """
 
     def __init__(self, workers: int = 2) -> None:
-        """Start the workers (in the background: the first build waits for them)."""
+        """Use (and start, the first time) the process's worker pool."""
         self.workers = workers
-        self._context = multiprocessing.get_context("forkserver")
-        self._context.set_forkserver_preload(["app.server.rebuild"])
-        self._cancel = self._context.Value("q", 0, lock=False)
-        self._pool: list[_Worker] = []
-        self._log: EventLog | None = None
+        self.pool = worker_pool(workers)
         self._next_task = 0
-        self._generation = 0
-        self._ready = threading.Event()
-        self._failed: str | None = None
-        threading.Thread(target=self._start, name="cogmap-rebuild-start", daemon=True).start()
 
-    def _start(self) -> None:
-        try:
-            self._pool = [_Worker(self._context, self._cancel) for _ in range(self.workers)]
-        except Exception as exc:  # no worker processes: build on the calling thread instead
-            self._failed = f"{type(exc).__name__}: {exc}"
-            print(f"cogmap serve: rebuild workers unavailable ({self._failed})", file=sys.stderr)
-        finally:
-            self._ready.set()
-
-    @property
-    def available(self) -> bool:
-        """Whether the worker processes run."""
-        self._ready.wait()
-        return self._failed is None and all(w.process.is_alive() for w in self._pool)
+    def _pool_workers(self) -> list[_Worker]:
+        return self.pool.workers[: self.workers]
 
     def reset(self) -> None:
-        """Forget the log the workers hold (a new bag or session)."""
-        self._log = None
+        """Nothing to do: workers notice a new log by themselves."""
 
     def prepare(self, log: EventLog) -> None:
         """Send every worker the events of ``log`` it does not have yet (while nothing builds)."""
-        if self._ready.is_set() and self.available:
-            for worker in self._pool:
-                if worker.busy is None:
+        if not self.pool.ready or not self.pool.lock.acquire(blocking=False):
+            return
+        try:
+            if self.pool.available():
+                for worker in self._pool_workers():
                     self._sync(worker, log)
+        finally:
+            self.pool.lock.release()
 
-    def _sync(self, worker: _Worker, log: EventLog) -> None:
-        if self._log is not log:  # a new log: every worker starts over
-            self._log = log
-            for w in self._pool:
-                w.conn.send(("reset",))
-                w.events = w.frames = 0
+    @staticmethod
+    def _sync(worker: _Worker, log: EventLog) -> None:
+        if worker.log is not log or worker.frames > log.frames:  # another log: start over
+            worker.conn.send(("reset",))
+            worker.log, worker.events, worker.frames = log, 0, 0
         frames = log.frames
         if worker.frames == frames:
             return
@@ -420,22 +497,29 @@ class ProcessBuilder:
             RuntimeError: a worker failed.
 
         """
-        if not self.available:
+        if not tasks:
+            return
+        if not self.pool.available():
             yield from ThreadBuilder().build(log, tasks, interrupted)
             return
-        self._generation += 1
-        generation = self._cancel.value = self._generation
+        with self.pool.lock:
+            yield from self._build(log, tasks, interrupted)
+
+    def _build(
+        self, log: EventLog, tasks: Sequence[BuildTask], interrupted: Interrupted
+    ) -> Iterator[Built]:
+        workers = self._pool_workers()
         pending = list(tasks)
         running: dict[int, tuple[_Worker, BuildTask]] = {}
         try:
             while pending or running:
-                for worker in self._pool:
+                for worker in workers:
                     if pending and worker.busy is None:
                         task = pending.pop(0)
                         self._sync(worker, log)
                         self._next_task += 1
                         worker.busy = self._next_task
-                        worker.conn.send(("build", self._next_task, task, generation))
+                        worker.conn.send(("build", self._next_task, task))
                         running[self._next_task] = (worker, task)
                 if interrupted():
                     raise Abandoned
@@ -443,33 +527,36 @@ class ProcessBuilder:
                     [w.conn for w, _ in running.values()], timeout=POLL_S
                 )
                 for conn in ready:
-                    worker = next(w for w in self._pool if w.conn is conn)
+                    worker = next(w for w in workers if w.conn is conn)
                     reply = self._receive(worker)
-                    task_id = reply[1]
                     worker.busy = None
-                    _, task = running.pop(task_id)
+                    _, task = running.pop(reply[1])
                     if reply[0] == "done":
-                        cmap = pickle.loads(reply[2])
-                        yield Built(task, cmap, float(reply[3]))
+                        yield Built(task, pickle.loads(reply[2]), float(reply[3]))
                     elif reply[0] == "error":
                         raise RuntimeError(f"rebuild of the {task.mode.value} map: {reply[2]}")
-                    else:  # abandoned: only happens after a cancel, which raised already
+                    else:  # abandoned: only after a cancel, which was raised already
                         raise Abandoned
         except BaseException:
-            self._cancel.value = -1  # whatever is in flight is dropped
-            self._drain()
+            self._cancel(workers)
             raise
 
     def _receive(self, worker: _Worker) -> tuple[Any, ...]:
         try:
             return worker.conn.recv()  # type: ignore[no-any-return]
         except (EOFError, OSError):
-            self._failed = "a rebuild worker exited"
             raise RuntimeError("a rebuild worker exited; restart the server") from None
 
-    def _drain(self) -> None:
-        """Wait for the workers to drop their abandoned builds (each replies once)."""
-        for worker in self._pool:
+    @staticmethod
+    def _cancel(workers: list[_Worker]) -> None:
+        """Make the busy workers drop their builds, and wait for each one's reply."""
+        for worker in workers:
+            if worker.busy is not None:
+                try:
+                    worker.conn.send(("cancel",))
+                except (OSError, ValueError):
+                    worker.busy = None
+        for worker in workers:
             if worker.busy is None:
                 continue
             try:
@@ -480,19 +567,7 @@ class ProcessBuilder:
             worker.busy = None
 
     def close(self) -> None:
-        """Stop the workers."""
-        self._ready.wait()
-        for worker in self._pool:
-            try:
-                worker.conn.send(("stop",))
-            except (OSError, ValueError):
-                pass
-        for worker in self._pool:
-            worker.process.join(2.0)
-            if worker.process.is_alive():
-                worker.process.kill()
-            worker.conn.close()
-        self._pool = []
+        """Stop using the workers (they stay for the next builder of this process)."""
 
 
 Builder = ThreadBuilder | ProcessBuilder
@@ -509,6 +584,14 @@ def make_builder(workers: int) -> Builder:
         return ThreadBuilder()
 
 
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m app.server.rebuild FD``: a worker talking over the socket ``FD``."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the server stops its workers itself
+    _worker_main(multiprocessing.connection.Connection(int(args[0])))
+    return 0
+
+
 __all__ = [
     "Abandoned",
     "BuildTask",
@@ -523,3 +606,7 @@ __all__ = [
     "make_builder",
     "same_schedule",
 ]
+
+
+if __name__ == "__main__":
+    sys.exit(main())
