@@ -170,6 +170,7 @@ class CogmapApp:
         self._setting = threading.local()
         self._pending_frame: tuple[Frame, int | None] | None = None
         self.status_note = ""
+        self._typed: dict[str, tuple[str, str]] = {}  # box -> (normal text, message)
         self._default_modes: tuple[MapMode, ...] = (MapMode.COMPACT,)
         self.views: dict[int, ClientView] = {}
         self.exports: list[Path] = []
@@ -331,7 +332,7 @@ class CogmapApp:
             )
             gate.guard(
                 self.param_boxes[spec.name],
-                typed_check(spec),
+                self._box_check(spec),
                 label=f"{spec.label} box",
                 note=self._param_note,
             )
@@ -542,6 +543,19 @@ class CogmapApp:
         self._set_quietly(self.param_boxes[spec.name], format_value(value))
         self.request_params()
 
+    def _box_check(self, spec: SliderSpec) -> Any:
+        """The box's check, remembering how the text was read (its message names the range)."""
+        check = typed_check(spec)
+
+        def remembered(value: object) -> object:
+            self._typed.pop(spec.name, None)
+            result = check(value)
+            if isinstance(result, Adjusted):
+                self._typed[spec.name] = (result.value, result.message)
+            return result
+
+        return remembered
+
     def _on_box(self, spec: SliderSpec) -> None:
         if self._suppress_param_events:
             return
@@ -556,7 +570,11 @@ class CogmapApp:
             )
             self._set_quietly(box, format_value(current))
             return
-        self.params_md.content = self._params_message(typed.message)
+        message = typed.message
+        remembered = self._typed.pop(spec.name, None)
+        if remembered is not None and remembered[0] == box.value:
+            message = remembered[1]  # what was typed, before the gate normalised it
+        self.params_md.content = self._params_message(message)
         self._set_quietly(box, format_value(typed.value))
         self._set_quietly(self.param_sliders[spec.name], typed.value)
         self.request_params()
@@ -566,7 +584,7 @@ class CogmapApp:
         spec = SPECS[name]
         box = self.param_boxes[name]
         try:
-            value = typed_check(spec)(typed)
+            value = self._box_check(spec)(typed)
         except Refused as exc:
             current = getattr(self.replay.params, spec.name)
             self._param_note(f"refused {spec.label} box: {exc}; kept {format_value(current)!r}")
@@ -578,8 +596,8 @@ class CogmapApp:
             self._on_box(spec)
         else:
             box.value = value
-        if message is not None:
-            self._param_note(message)
+        if message is not None and self._typed.pop(spec.name, None) is not None:
+            self._param_note(message)  # (the box's callback did not run)
 
     def current_slider_params(self) -> MapParams:
         """The parameters the controls show, each clamped into its slider's range.

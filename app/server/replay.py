@@ -370,6 +370,7 @@ class Replay:
                 else:
                     idle = False
                     self._busy = 1
+                    self._update_state_locked()  # e.g. paused -> playing
             if idle:
                 if self.state is not PlaybackState.LOADING:
                     self.builder.prepare(self.session.log)  # the next rebuild starts at once
@@ -586,6 +587,7 @@ class Replay:
         with self._cond:
             self._fast_forward_to = None
             self._step_request = 0
+            self._playing = False  # ended: a seek stays there; play starts over (the page)
         self._update_state_locked()
         self._notify_maps(ALL_MODES, True)
         self._notify_status()

@@ -15,7 +15,7 @@ each viewer can show or hide it (:mod:`app.server.view` shadows these frames per
 - ``odometry/cNNNN`` -- the dead-reckoned path (odometry alone), in the map's own frame;
 - ``robot`` -- a triangle at the robot's current (dead-reckoned) pose.
 
-A metric grid with a 1 m scale bar lives under ``/grid``.
+- ``grid`` -- a metric grid (0.1 m cells, 1 m sections) with a 1 m scale bar under the map.
 
 Between two optimisations a map only grows at its end, so only the last chunk of each layer
 changes: :class:`ChunkedNodes` compares every chunk with what it last sent and re-sends only the
@@ -54,7 +54,7 @@ MAP_COLORS: dict[MapMode, tuple[int, int, int]] = {
 SEQUENTIAL_COLOR = (125, 125, 125)
 GROUND_TRUTH_COLOR = (160, 160, 160)
 ODOMETRY_COLOR = (176, 122, 64)
-FALSE_LOOP_COLOR = (230, 0, 200)
+FALSE_LOOP_COLOR = (220, 20, 20)
 ROBOT_COLOR = (15, 15, 15)
 PINNED_COLOR = (128, 96, 170)
 SELECTION_COLOR = (255, 196, 0)
@@ -340,7 +340,15 @@ class MapExtras:
 
 
 #: The layers of a map a viewer can switch on and off (frame names under ``/map/<mode>``).
-LAYERS: tuple[str, ...] = ("vertices", "sequential", "loop", "false_loops", "truth", "odometry")
+LAYERS: tuple[str, ...] = (
+    "vertices",
+    "sequential",
+    "loop",
+    "false_loops",
+    "truth",
+    "odometry",
+    "grid",
+)
 
 
 class MapLayer:
@@ -370,6 +378,7 @@ class MapLayer:
                 )
         self.groups["odometry"].visible = False
         self.truth_frame = scene.add_frame(f"{self.name}/truth/aligned", show_axes=False)
+        self.grid = Grid(server, f"{self.name}/grid")
         self._offset = 0.0
         self.point_size = VERTEX_SIZE_RANGE[1]
 
@@ -501,6 +510,8 @@ class MapLayer:
                 self._coloured_key[colouring] = ckey
         if extras is not None:
             self._send_extras(cmap, extras, changed)
+        if changed:
+            self.grid.cover(self.extent)
         pose = cmap.current_pose()
         robot = (float(pose[0]), float(pose[1]), float(pose[2]))
         if robot != self._robot_pose:
@@ -607,15 +618,16 @@ class MapLayer:
         self._truth_sent = None
         self._false_key = None
         self.extent = None
+        self.grid._box = None
 
 
 class Grid:
-    """A metric grid (0.1 m cells, 1 m sections) under the maps, with a 1 m scale bar."""
+    """A metric grid (0.1 m cells, 1 m sections) under a map, with a 1 m scale bar."""
 
-    def __init__(self, server: viser.ViserServer) -> None:
-        """Create the (empty) grid frame."""
+    def __init__(self, server: viser.ViserServer, name: str) -> None:
+        """Create the (empty) grid under the frame ``name``."""
         self.server = server
-        self.frame = server.scene.add_frame("/grid", show_axes=False)
+        self.name = name
         self._box: tuple[float, float, float, float] | None = None
 
     def cover(self, extent: tuple[float, float, float, float] | None) -> None:
@@ -632,7 +644,7 @@ class Grid:
         scene = self.server.scene
         with self.server.atomic():
             scene.add_grid(
-                "/grid/plane",
+                f"{self.name}/plane",
                 width=x1 - x0,
                 height=y1 - y0,
                 plane="xy",
@@ -645,9 +657,13 @@ class Grid:
             )
             bar = np.array([[[x0 + 0.2, y0 + 0.3, 0.0], [x0 + 1.2, y0 + 0.3, 0.0]]], np.float32)
             scene.add_line_segments(
-                "/grid/scale", bar, colors=(40, 40, 40), thickness=4.0, thickness_units="screen"
+                f"{self.name}/scale",
+                bar,
+                colors=(40, 40, 40),
+                thickness=4.0,
+                thickness_units="screen",
             )
-            scene.add_label("/grid/scale/label", "1 m", position=(x0 + 0.7, y0 + 0.42, 0.0))
+            scene.add_label(f"{self.name}/scale/label", "1 m", position=(x0 + 0.7, y0 + 0.42, 0.0))
 
 
 class SceneStreamer:
@@ -665,7 +681,6 @@ class SceneStreamer:
         self.server = server
         self.stats = StreamStats()
         self.layers: dict[MapMode, MapLayer] = {m: MapLayer(server, m, self.stats) for m in modes}
-        self.grid = Grid(server)
         self.shown: tuple[MapMode, ...] = ()
         self.needed: set[MapMode] = set()
         self.colourings: set[str] = {"cluster"}
@@ -729,7 +744,6 @@ class SceneStreamer:
                 )
                 layer.update_paths(truth, odometry, self.show_odometry)
             self._place()
-            self.grid.cover(self.extent(tuple(self.needed & set(self.layers))))
         self.stats.updates += 1
         self.stats.seconds += time.perf_counter() - started
 

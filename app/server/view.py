@@ -22,7 +22,7 @@ import html
 import math
 import threading
 import time
-from collections.abc import Callable
+import warnings
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -71,10 +71,14 @@ LAYER_LABELS: dict[str, str] = {
     "grid": "metric grid",
 }
 PIN_DISPLAYS: tuple[str, ...] = ("beside", "under")
+
+# A tab can close while its view is being updated; viser then warns that the message will not
+# be delivered. That is expected here, not a problem worth a warning.
+warnings.filterwarnings(
+    "ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning
+)
 #: The control panel's width on the page (px), left out when the camera frames the maps.
 PANEL_PX = 430
-#: Camera updates this soon (s) after the view moved the camera are the view's own.
-CAMERA_SETTLE_S = 1.5
 #: A click selects what lies within this many pixels.
 PICK_PX = 10.0
 
@@ -161,6 +165,8 @@ class ClientView:
         self._selection: list[viser.SceneNodeHandle] = []
         self._framed: tuple[float, float, float, float] | None = None
         self._camera_set_at = -math.inf
+        self._camera_expected: NDArray[np.float64] | None = None
+        self._camera_acknowledged = False
         self._log_key: tuple[Any, ...] | None = None
         self._compare_key: tuple[Any, ...] | None = None
         self._setting = False
@@ -310,7 +316,6 @@ class ClientView:
                 for kind in ("sequential", "loop"):
                     for colouring in COLOURINGS:
                         wanted[f"{root}/{kind}/{colouring}"] = (colouring == s.colouring, 0.0)
-            wanted["/grid"] = (s.layers["grid"], 0.0)
             with self.client.atomic():
                 for name, (visible, x) in wanted.items():
                     self._shadow(name, visible, x)
@@ -416,6 +421,8 @@ class ClientView:
         else:
             position = (cx + 0.35 * distance, cy - 0.75 * distance, 0.65 * distance)
         self._camera_set_at = time.monotonic()
+        self._camera_expected = np.array(position)
+        self._camera_acknowledged = False
         self._framed = extent
         with self.client.atomic():
             camera.up_direction = (0.0, 0.0, 1.0)
@@ -443,9 +450,23 @@ class ClientView:
                 return
         self.frame_camera(top=True)
 
-    def _on_camera(self, _: viser.CameraHandle) -> None:
-        """The viewer moved the camera: stop following the map."""
-        if time.monotonic() - self._camera_set_at < CAMERA_SETTLE_S or not self.state.follow:
+    def _on_camera(self, camera: viser.CameraHandle) -> None:
+        """A camera report: the viewer moved the camera (not the view): stop following the map.
+
+        Reports before the browser shows the pose the view set are its way there; after it,
+        a different pose is the viewer's doing.
+        """
+        expected = self._camera_expected
+        if expected is None or not self.state.follow:
+            return
+        position = np.asarray(camera.position, dtype=float)
+        close = bool(
+            np.allclose(position, expected, rtol=1e-3, atol=1e-3 * (1 + np.abs(expected).max()))
+        )
+        if not self._camera_acknowledged:
+            self._camera_acknowledged = close
+            return
+        if close:
             return
         self.state.follow = False
         self._setting = True
@@ -522,7 +543,7 @@ class ClientView:
                         name,
                         seg[0, :1],
                         colors=SELECTION_COLOR,
-                        point_size=0.05,
+                        point_size=0.035,
                         point_shape="circle",
                     )
                 )
@@ -716,27 +737,31 @@ def nearest_pick(
     point: NDArray[np.float64],
     tolerance: float,
     false_times: NDArray[np.float64],
-    describe: Callable[..., str] | None = None,
 ) -> tuple[float, Pick] | None:
-    """The vertex (preferred) or edge of ``cmap`` nearest to ``point`` within ``tolerance``."""
+    """The vertex or edge of ``cmap`` nearest to ``point`` within ``tolerance``.
+
+    A vertex wins unless the point is clearly closer to an edge (less than half as far): a
+    click on a vertex selects it, a click on an edge between vertices selects the edge.
+    """
     snap = cmap.snapshot()
     if snap.vertex_ids.shape[0] == 0:
         return None
     d = np.hypot(snap.poses[:, 0] - point[0], snap.poses[:, 1] - point[1])
     k = int(np.argmin(d))
+    gap_e, e = math.inf, -1
+    if snap.edge_from.shape[0]:
+        a = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
+        b = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
+        ab = b - a
+        denom = np.einsum("ij,ij->i", ab, ab)
+        t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
+        gap = np.hypot(*(point - (a + ab * t[:, None])).T)
+        e = int(np.argmin(gap))
+        gap_e = float(gap[e])
+    if e >= 0 and gap_e <= tolerance and gap_e < 0.5 * d[k]:
+        seg = np.array([a[e], b[e]])
+        return gap_e, Pick(mode, "edge", e, describe_edge(cmap, snap, e, false_times), seg)
     if d[k] <= tolerance:
         seg = np.array([snap.poses[k, :2], snap.poses[k, :2]])
         return float(d[k]), Pick(mode, "vertex", k, describe_vertex(cmap, snap, k), seg)
-    if snap.edge_from.shape[0] == 0:
-        return None
-    a = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
-    b = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
-    ab = b - a
-    denom = np.einsum("ij,ij->i", ab, ab)
-    t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
-    gap = np.hypot(*(point - (a + ab * t[:, None])).T)
-    e = int(np.argmin(gap))
-    if gap[e] > tolerance:
-        return None
-    seg = np.array([a[e], b[e]])
-    return float(gap[e]), Pick(mode, "edge", e, describe_edge(cmap, snap, e, false_times), seg)
+    return None
