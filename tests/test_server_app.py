@@ -62,7 +62,7 @@ def differs(a: object, b: object) -> bool:
 
 
 def wait(app: CogmapApp) -> None:
-    assert app.replay.wait_idle(60), "the replay did not settle"
+    assert app.wait_idle(60), "the replay did not settle"
 
 
 def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSession) -> None:

@@ -35,7 +35,7 @@ reference = support.reference
 
 
 def wait(app: object) -> None:
-    assert app.replay.wait_idle(60), "the replay did not settle"  # type: ignore[attr-defined]
+    assert app.wait_idle(60), "the replay did not settle"  # type: ignore[attr-defined]
 
 
 def until(condition: object, timeout: float = 10.0) -> None:

@@ -180,11 +180,11 @@ def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
     headless = HeadlessPipeline(short_bag, tmp_path / "run", RunOptions(params=params))
     headless.run()
     with running_app(short_bag) as app:
-        assert app.replay.wait_idle(60)
+        assert app.wait_idle(60)
         assert app.replay.builder.workers == 2
         for name in ("delta", "t_interval", "t_total"):
             app.param_sliders[name].value = getattr(params, name)
-        assert app.replay.wait_idle(60)
+        assert app.wait_idle(60)
         record = app.replay.rebuilds[-1]
         assert record.completed and set(record.how.values()) == {"built"}
         rebuilt = reference.rebuild(params)
@@ -196,7 +196,7 @@ def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
             assert g2o_bytes(shown) == written
         # back to the paper's values: every map comes from the cache, exactly the first ones
         app.reset_params()
-        assert app.replay.wait_idle(60)
+        assert app.wait_idle(60)
         record = app.replay.rebuilds[-1]
         assert record.how == {m: "cached" for m in MapMode}
         for mode in MapMode:
@@ -211,7 +211,7 @@ def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
         )
         before = dict(app.replay.session.maps.maps)
         app.param_sliders["t_total"].value = kept
-        assert app.replay.wait_idle(60)
+        assert app.wait_idle(60)
         assert app.replay.rebuilds[-1].how == {m: "kept" for m in MapMode}
         for mode in MapMode:
             assert app.replay.session.maps[mode] is before[mode]

@@ -182,6 +182,11 @@ class CogmapApp:
         self._waiting_for_viewer = autoplay and wait_for_viewer
         self._switch_lock = threading.Lock()
         self._connect_lock = threading.Lock()
+        self._figures_cond = threading.Condition()
+        self._figures_todo: set[MapMode] = set()
+        self._figures_stop = False
+        self._figures_busy = False
+        threading.Thread(target=self._figures_loop, name="cogmap-figures", daemon=True).start()
         self.started_at = time.monotonic()
         self.replay = self._make_replay(bag, params, speed, autoplay and not wait_for_viewer)
         self.streamer = SceneStreamer(server)
@@ -211,9 +216,25 @@ class CogmapApp:
         """Start replaying."""
         self.replay.start()
 
+    def wait_idle(self, timeout: float = 60.0) -> bool:
+        """Wait until the replay is idle and the page caught up with it (scripts and tests)."""
+        deadline = time.monotonic() + timeout
+        if not self.replay.wait_idle(timeout):
+            return False
+        while time.monotonic() < deadline:
+            with self._figures_cond:
+                done = not self._figures_todo and not self._figures_busy
+            if done:
+                return True
+            time.sleep(0.01)
+        return False
+
     def stop(self) -> None:
         """Stop the replay worker (the server is stopped by its owner)."""
         self.replay.stop()
+        with self._figures_cond:
+            self._figures_stop = True
+            self._figures_cond.notify()
 
     # ================================================================== GUI
     def _build_gui(self, params: MapParams, speed: float, autoplay: bool) -> None:
@@ -424,7 +445,12 @@ class CogmapApp:
             for mode in view.state.shown:
                 local = point - np.array([offsets[mode.value], 0.0])
                 found = nearest_pick(
-                    self.replay.session.maps[mode], mode, local, tolerance, self._false_times
+                    self.replay.session.maps[mode],
+                    mode,
+                    local,
+                    tolerance,
+                    self._false_times,
+                    self.streamer.layers[mode].point_size / 2,
                 )
                 if found is not None and (best is None or found[0] < best[0]):
                     best = found
@@ -670,8 +696,8 @@ class CogmapApp:
             self._show_frame()
         with replay.lock, self.scene_lock:
             self._update_figures(forced, modes)
+            self._update_counters()  # first: the browser shows text at once, geometry later
             self._publish_scene()
-            self._update_counters()
             if self._chart_limit.due(forced):
                 self._update_chart()
             if self._views_limit.due(forced):
@@ -684,24 +710,71 @@ class CogmapApp:
 
     # ------------------------------------------------------------------ page content
     def _update_figures(self, forced: bool, modes: tuple[MapMode, ...]) -> None:
-        """ATE, fidelity and truth alignment of the maps (1 Hz; at once for rebuilt maps)."""
-        session = self.replay.session
-        log_ = session.log
-        key = (id(log_), log_.frames)
-        if key != self._false_key and (forced or self._figures_limit.due()):
-            self._false_key = key
-            self._false_times = false_link_times(log_)
-        due = self._figures_limit.due(forced) if not forced else True
-        todo = modes if forced else (ORDER if due else ())
-        for mode in todo:
-            cmap = session.maps[mode]
-            mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
-                    log_.frames)  # fmt: skip
-            if self._figures_key.get(mode) == mkey:
-                continue
-            self._figures_key[mode] = mkey
-            self._figures[mode] = map_figures(log_, cmap)
-            self.stats_version += 1
+        """Ask for the accuracy figures of the maps (1 Hz; at once for rebuilt maps).
+
+        They take some 30 ms per map (the layout fidelity most), so they are computed on their
+        own thread (:meth:`_figures_loop`) after the map is shown, and the page follows.
+        """
+        if forced:
+            todo: tuple[MapMode, ...] = modes
+        elif self._figures_limit.due():
+            todo = ORDER
+        else:
+            return
+        with self._figures_cond:
+            self._figures_todo.update(todo)
+            self._figures_cond.notify()
+
+    def _figures_loop(self) -> None:
+        while True:
+            with self._figures_cond:
+                while not self._figures_todo and not self._figures_stop:
+                    self._figures_cond.wait(0.5)
+                if self._figures_stop:
+                    return
+                todo = [m for m in ORDER if m in self._figures_todo]
+                self._figures_todo.clear()
+                self._figures_busy = True
+            try:
+                self._compute_figures(todo)
+            except Exception:  # a figure must never stop the page
+                traceback.print_exc()
+            finally:
+                with self._figures_cond:
+                    self._figures_busy = False
+
+    def _compute_figures(self, modes: list[MapMode]) -> None:
+        replay = self.replay
+        changed = False
+        with replay.lock:
+            log_ = replay.session.log
+            key = (id(log_), log_.frames)
+            if key != self._false_key:
+                self._false_key = key
+                self._false_times = false_link_times(log_)
+                changed = True
+            for mode in modes:
+                cmap = replay.session.maps[mode]
+                mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
+                        log_.frames)  # fmt: skip
+                if self._figures_key.get(mode) == mkey:
+                    continue
+                figures = map_figures(log_, cmap)
+                with self.scene_lock:
+                    self._figures_key[mode] = mkey
+                    self._figures[mode] = figures
+                    self.stats_version += 1
+                changed = True
+        if not changed:
+            return
+        with replay.lock, self.scene_lock:
+            self._publish_scene()  # the truth's alignment, the false loop closures
+            self._update_counters()
+            for view in list(self.views.values()):
+                try:
+                    view.refresh()
+                except Exception:
+                    traceback.print_exc()
 
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log

@@ -32,6 +32,7 @@ import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import viser
@@ -215,21 +216,31 @@ class StreamStats:
 
 
 NodeFactory = Callable[[str, np.ndarray, np.ndarray | None], viser.SceneNodeHandle]
+#: Puts new content into an existing node (returns False when it cannot).
+NodeUpdater = Callable[[viser.SceneNodeHandle, np.ndarray, np.ndarray | None], bool]
 
 
 class ChunkedNodes:
     """A growing array of items shown as scene nodes of :data:`CHUNK` items each.
 
     :meth:`sync` sends only the chunks whose content differs from what was last sent, and removes
-    chunks beyond the new length.
+    chunks beyond the new length. A changed chunk is updated in place when ``updater`` is given
+    (its points and colours replaced): a browser then keeps the node and its material, which is
+    much cheaper than making a new one (a new line material is compiled, slowly without a GPU).
     """
 
     def __init__(
-        self, name: str, factory: NodeFactory, stats: StreamStats, chunk: int = CHUNK
+        self,
+        name: str,
+        factory: NodeFactory,
+        stats: StreamStats,
+        chunk: int = CHUNK,
+        updater: NodeUpdater | None = None,
     ) -> None:
         """Manage nodes ``<name>/c0000``, ``<name>/c0001``, ... made by ``factory``."""
         self.name = name
         self.factory = factory
+        self.updater = updater
         self.stats = stats
         self.chunk = chunk
         self._handles: list[viser.SceneNodeHandle] = []
@@ -275,13 +286,15 @@ class ChunkedNodes:
                     and (cpart is None or np.array_equal(old_colors, cpart))
                 ):
                     continue
-            handle = self.factory(f"{self.name}/c{c:04d}", part, cpart)
             record = (part.copy(), None if cpart is None else cpart.copy())
             if c < len(self._handles):
+                handle = self._handles[c]
+                if self.updater is None or not self.updater(handle, part, cpart):
+                    handle = self.factory(f"{self.name}/c{c:04d}", part, cpart)
                 self._handles[c] = handle
                 self._sent[c] = record
             else:
-                self._handles.append(handle)
+                self._handles.append(self.factory(f"{self.name}/c{c:04d}", part, cpart))
                 self._sent.append(record)
             sent += 1
             self.stats.items_sent += part.shape[0]
@@ -410,22 +423,57 @@ class MapLayer:
 
             return make
 
-        self.vertices = ChunkedNodes(f"{self.name}/vertices", vertices, stats)
+        def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> bool:
+            with server.atomic():
+                handle.points = part
+                handle.colors = np.broadcast_to(
+                    np.array(self.color, np.uint8), (part.shape[0], 3)
+                ).copy()
+                if handle.point_size != self.point_size:
+                    handle.point_size = self.point_size
+            return True
+
+        def move_segments(color: tuple[int, int, int] | None) -> NodeUpdater:
+            def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> bool:
+                if cols is None:
+                    cols = np.broadcast_to(np.array(color, np.uint8), part.shape).copy()
+                with server.atomic():
+                    handle.points = part
+                    handle.colors = cols
+                return True
+
+            return update
+
+        self.vertices = ChunkedNodes(f"{self.name}/vertices", vertices, stats, updater=move_points)
         self.edges: dict[str, ChunkedNodes] = {}
         for colouring in COLOURINGS:
             self.edges[f"sequential/{colouring}"] = ChunkedNodes(
-                f"{self.name}/sequential/{colouring}", segments(1.5), stats
+                f"{self.name}/sequential/{colouring}",
+                segments(1.5),
+                stats,
+                updater=move_segments(None),
             )
             self.edges[f"loop/{colouring}"] = ChunkedNodes(
-                f"{self.name}/loop/{colouring}", segments(3.0), stats
+                f"{self.name}/loop/{colouring}", segments(3.0), stats, updater=move_segments(None)
             )
         self.false_loops = ChunkedNodes(
-            f"{self.name}/false_loops", plain(FALSE_LOOP_COLOR, 6.0), stats
+            f"{self.name}/false_loops",
+            plain(FALSE_LOOP_COLOR, 6.0),
+            stats,
+            updater=move_segments(FALSE_LOOP_COLOR),
         )
         self.truth = ChunkedNodes(
-            f"{self.name}/truth/aligned", plain(GROUND_TRUTH_COLOR, 1.5), stats
+            f"{self.name}/truth/aligned",
+            plain(GROUND_TRUTH_COLOR, 1.5),
+            stats,
+            updater=move_segments(GROUND_TRUTH_COLOR),
         )
-        self.odometry = ChunkedNodes(f"{self.name}/odometry", plain(ODOMETRY_COLOR, 1.5), stats)
+        self.odometry = ChunkedNodes(
+            f"{self.name}/odometry",
+            plain(ODOMETRY_COLOR, 1.5),
+            stats,
+            updater=move_segments(ODOMETRY_COLOR),
+        )
         tri_v, tri_f = robot_triangle(0.07)
         self.robot = scene.add_mesh_simple(
             f"{self.name}/robot",
@@ -679,6 +727,9 @@ class SceneStreamer:
     ) -> None:
         """Create the scene's layers (empty) for ``modes``."""
         self.server = server
+        # Flat 2-D maps cast no useful shadows; without them a moving robot does not make the
+        # browser redraw shadow maps (slow without a GPU: a third of a second per update).
+        server.scene.configure_default_lights(True, cast_shadow=False)
         self.stats = StreamStats()
         self.layers: dict[MapMode, MapLayer] = {m: MapLayer(server, m, self.stats) for m in modes}
         self.shown: tuple[MapMode, ...] = ()

@@ -598,7 +598,7 @@ class ClientView:
                     "/pinned/vertices",
                     points,
                     colors=PINNED_COLOR,
-                    point_size=0.02,
+                    point_size=0.025,
                     point_shape="circle",
                     point_shading="flat",
                 )
@@ -737,11 +737,13 @@ def nearest_pick(
     point: NDArray[np.float64],
     tolerance: float,
     false_times: NDArray[np.float64],
+    vertex_radius: float = 0.0,
 ) -> tuple[float, Pick] | None:
     """The vertex or edge of ``cmap`` nearest to ``point`` within ``tolerance``.
 
-    A vertex wins unless the point is clearly closer to an edge (less than half as far): a
-    click on a vertex selects it, a click on an edge between vertices selects the edge.
+    An edge counts only away from its ends (by ``vertex_radius``, the drawn dot, at most a
+    quarter of its length): a click on a vertex's dot selects the vertex, a click along an
+    edge between two vertices the edge. Ties go to the vertex.
     """
     snap = cmap.snapshot()
     if snap.vertex_ids.shape[0] == 0:
@@ -753,12 +755,15 @@ def nearest_pick(
         a = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
         b = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
         ab = b - a
-        denom = np.einsum("ij,ij->i", ab, ab)
-        t = np.clip(np.einsum("ij,ij->i", point - a, ab) / np.where(denom > 0, denom, 1.0), 0, 1)
+        length = np.hypot(ab[:, 0], ab[:, 1])
+        denom = np.where(length > 0, length * length, 1.0)
+        t = np.clip(np.einsum("ij,ij->i", point - a, ab) / denom, 0, 1)
         gap = np.hypot(*(point - (a + ab * t[:, None])).T)
+        zone = np.minimum(0.25 * length, vertex_radius)
+        gap[np.minimum(t, 1 - t) * length < zone] = np.inf  # at an end: that vertex's
         e = int(np.argmin(gap))
         gap_e = float(gap[e])
-    if e >= 0 and gap_e <= tolerance and gap_e < 0.5 * d[k]:
+    if gap_e <= tolerance and gap_e < d[k]:
         seg = np.array([a[e], b[e]])
         return gap_e, Pick(mode, "edge", e, describe_edge(cmap, snap, e, false_times), seg)
     if d[k] <= tolerance:
