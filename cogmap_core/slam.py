@@ -4,6 +4,11 @@ The front end (view templates, pose cells) is the expensive, parameter-independe
 events depend only on the data. The session keeps them, so the maps can be rebuilt for other
 map parameters (alpha, beta, delta, T_interval, T_total, ...) up to any frame without touching
 the bag again -- what the web app's sliders do. No I/O happens here.
+
+A session takes camera :class:`~cogmap_core.frames.Frame` objects (run through the RatSLAM front
+end) or :class:`~cogmap_core.frames.EventStep` objects whose events are already known (a log of
+odometry and place recognition, :mod:`cogmap_core.sources.odometry_log`); both are logged the
+same way, one "frame" per item.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
     TRUE_LOOP_CLOSURE_DISTANCE,
     TRUE_LOOP_CLOSURE_HEADING,
+    EvaluationSettings,
     LayoutFidelity,
     LoopClosureScore,
     SizeChange,
@@ -33,7 +39,7 @@ from cogmap_core.evaluation import (
 )
 from cogmap_core.event_file import EventRecording
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry
-from cogmap_core.frames import Frame
+from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 
 FloatArray = NDArray[np.float64]
@@ -60,6 +66,7 @@ class EventLog:
     frame_time: list[float] = field(default_factory=list)
     ground_truth: list[tuple[float, float, float]] = field(default_factory=list)
     link_robot_truth: list[tuple[float, float, float] | None] = field(default_factory=list)
+    link_scores: list[float | None] = field(default_factory=list)  # per link; None: no score
 
     @property
     def frames(self) -> int:
@@ -172,17 +179,21 @@ class EventLog:
             if type(event) is LinkToVertex
         ]
 
+    def link_score(self, k: int) -> float | None:
+        """Place-recognition score of link ``k`` of :meth:`link_table` (None when unknown)."""
+        return self.link_scores[k] if k < len(self.link_scores) else None
+
     def loop_closure_score(
         self,
         distance: float = TRUE_LOOP_CLOSURE_DISTANCE,
-        heading: float = TRUE_LOOP_CLOSURE_HEADING,
+        heading: float | None = TRUE_LOOP_CLOSURE_HEADING,
     ) -> LoopClosureScore | None:
         """Front-end loop closures judged by ground truth, position and heading.
 
         A link is true when the robot's true position is within ``distance`` of the target
         vertex's true position (at its creation) and the heading the link claims (target heading
-        plus the link's relative angle) is within ``heading`` of the robot's true heading.
-        ``false_indices`` index :meth:`link_table`.
+        plus the link's relative angle) is within ``heading`` of the robot's true heading
+        (``heading=None``: position only). ``false_indices`` index :meth:`link_table`.
         """
         if not self.has_ground_truth():
             return None
@@ -203,6 +214,8 @@ class EventLog:
         if not robot:
             return score_loop_closures(np.zeros((0, 3)), np.zeros((0, 3)))
         target = self.truth_at(np.asarray(target_time))
+        if heading is None:
+            return score_loop_closures(np.asarray(robot), target, None, distance)
         return score_loop_closures(
             np.asarray(robot), target, np.asarray(relative), distance, heading
         )
@@ -246,19 +259,28 @@ class SlamSession:
         params: MapParams | None = None,
         frontend_config: FrontEndConfig | None = None,
         modes: tuple[MapMode, ...] = ALL_MODES,
+        evaluation: EvaluationSettings | None = None,
     ) -> None:
-        """Start an empty session."""
+        """Start an empty session (``evaluation``: tolerances of the accuracy figures)."""
         self.params = params or MapParams()
         self.frontend = FrontEnd(frontend_config)
         self.modes = modes
         self.maps = MapSet(self.params, modes)
         self.log = EventLog()
         self.finished = False
+        self.evaluation = evaluation or EvaluationSettings()
 
     # ------------------------------------------------------------------ processing
-    def process(self, frame: Frame) -> FrameOutput:
-        """Run the front end on one frame and apply its events to every map."""
-        events = self.frontend.process(frame)
+    def process(self, frame: Frame | EventStep) -> FrameOutput:
+        """Log one frame's events (the front end's, or a step's own) and apply them to every map."""
+        if isinstance(frame, EventStep):
+            events: list[MapEvent] = list(frame.events)
+            scores: list[float | None] = list(frame.link_scores)
+            view_template = None
+        else:
+            events = self.frontend.process(frame)
+            scores = []
+            view_template = self.frontend.current_template
         log = self.log
         log.events.extend(events)
         log.frame_end.append(len(log.events))
@@ -268,16 +290,17 @@ class SlamSession:
         for event in events:
             if isinstance(event, LinkToVertex):
                 log.link_robot_truth.append(frame.ground_truth)
+                log.link_scores.append(scores.pop(0) if scores else None)
             self.maps.apply(event)
         return FrameOutput(
             index=frame.index,
             time=float(frame.time),
             events=tuple(events),
-            view_template=self.frontend.current_template,
+            view_template=view_template,
             template_count=self.frontend.template_count,
         )
 
-    def run(self, frames: Iterable[Frame]) -> None:
+    def run(self, frames: Iterable[Frame | EventStep]) -> None:
         """Process every frame, then finish."""
         for frame in frames:
             self.process(frame)
@@ -343,8 +366,9 @@ class SlamSession:
         return self.log.layout_fidelity(cmap, radius)
 
     def loop_closure_score(self) -> LoopClosureScore | None:
-        """Front-end loop closures judged by ground truth (position and heading)."""
-        return self.log.loop_closure_score()
+        """Front-end loop closures judged by ground truth, with the session's tolerances."""
+        judging = self.evaluation
+        return self.log.loop_closure_score(judging.loop_distance, judging.loop_heading)
 
 
 def optimisation_summary(cmap: CognitiveMap) -> dict[str, float | int]:
