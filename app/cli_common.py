@@ -1,4 +1,4 @@
-"""Command-line options shared by several commands (dataset topics, map and front-end settings)."""
+"""Command-line options shared by several commands (input, topics, map and front-end settings)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,12 @@ from pathlib import Path
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
-from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.errors import CogmapError, InputFileError, ParameterError
 from cogmap_core.frontend import FrontEndConfig
+from cogmap_core.sources.detect import FORMATS, KINDS, InputKind, LogOptions, resolve_format
+from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
+
+_MAP_OPTIONS = ("alpha", "beta", "delta", "t_interval", "t_total")
 
 
 def add_topic_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,42 +37,86 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
 
 
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``."""
-    d = MapParams()
+    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``.
+
+    Unset options keep the default of the input's kind (the paper's for bags,
+    :data:`~cogmap_core.sources.odometry_log.LOG_MAP_PARAMS` for logs).
+    """
+    paper, log = MapParams(), LOG_MAP_PARAMS
+    meaning = {
+        "alpha": "translation weight, >= 0",
+        "beta": "rotation weight, >= 0",
+        "delta": "field threshold, > 1",
+        "t_interval": "cluster interval threshold (s), > 0",
+        "t_total": "cluster total-time threshold (s), > 0",
+    }
+    for name in _MAP_OPTIONS:
+        a, b = getattr(paper, name), getattr(log, name)
+        default = f"default {a:g}" if a == b else f"default {a:g}; {b:g} for logs"
+        parser.add_argument(
+            "--" + name.replace("_", "-"),
+            type=float,
+            default=None,
+            help=f"{meaning[name]} ({default})",
+        )
+
+
+def params_from_args(args: argparse.Namespace, base: MapParams | None = None) -> MapParams:
+    """Map parameters: ``base`` (the input kind's defaults) with the options given.
+
+    Out-of-range values name the valid range.
+    """
+    given = {name: getattr(args, name) for name in _MAP_OPTIONS if getattr(args, name) is not None}
+    return (base or MapParams()).with_changes(**given)
+
+
+def add_input_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--format``, and the files of a log: ``--loops``, ``--ground-truth``."""
     parser.add_argument(
-        "--alpha",
-        type=float,
-        default=d.alpha,
-        help=f"translation weight >= 0 (default {d.alpha:g})",
+        "--format",
+        choices=("auto", *FORMATS),
+        default="auto",
+        help="input kind (default auto: detected from the content): bag (ROS bag with camera), "
+        "tuc (TUC SLAM dataset odom2/loop lines), csv (time,v,omega odometry)",
     )
     parser.add_argument(
-        "--beta", type=float, default=d.beta, help=f"rotation weight, >= 0 (default {d.beta:g})"
+        "--loops",
+        default=None,
+        metavar="FILE",
+        help="CSV logs: the loop candidates time,matched_time,score (default: the file named "
+        "like the odometry file with 'odometry' replaced by 'loops')",
     )
     parser.add_argument(
-        "--delta", type=float, default=d.delta, help=f"field threshold, > 1 (default {d.delta:g})"
-    )
-    parser.add_argument(
-        "--t-interval",
-        type=float,
-        default=d.t_interval,
-        help=f"cluster interval threshold (s), > 0 (default {d.t_interval:g})",
-    )
-    parser.add_argument(
-        "--t-total",
-        type=float,
-        default=d.t_total,
-        help=f"cluster total-time threshold (s), > 0 (default {d.t_total:g})",
+        "--ground-truth",
+        default=None,
+        metavar="FILE",
+        help="logs: ground truth (TUC: X_GT.txt beside X_Input.txt; CSV: time,x,y[,theta], "
+        "default the 'ground_truth' companion)",
     )
 
 
-def params_from_args(args: argparse.Namespace) -> MapParams:
-    """Map parameters from the command line (out-of-range values name the valid range)."""
-    return MapParams(
-        alpha=args.alpha,
-        beta=args.beta,
-        delta=args.delta,
-        t_interval=args.t_interval,
-        t_total=args.t_total,
+def input_kind(args: argparse.Namespace, path: Path) -> InputKind:
+    """The kind of ``path`` (``--format`` or detected), with its defaults."""
+    kind = KINDS[resolve_format(path, args.format)]
+    if kind.has_camera and (args.loops is not None or args.ground_truth is not None):
+        raise ParameterError(
+            f"{path} is a bag: --loops and --ground-truth belong to logs "
+            "(a bag's ground truth is a topic, --gt-topic)"
+        )
+    return kind
+
+
+def log_options_from_args(args: argparse.Namespace) -> LogOptions:
+    """How to read a log: ``--frontend`` overrides of its settings and its companion files."""
+    try:
+        config = LogSourceConfig().with_changes(**_overrides(args.frontend))
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"--frontend: {exc}") from None
+    return LogOptions(
+        config=config,
+        loops=None if args.loops is None else Path(args.loops),
+        ground_truth=None if args.ground_truth is None else Path(args.ground_truth),
+        use_ground_truth=not args.no_ground_truth,
     )
 
 
@@ -80,14 +128,14 @@ def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="override a front-end setting (repeatable), e.g. --frontend vt_match_threshold=0.03; "
-        "applied after the iRat defaults and the bag's <name>.frontend.json profile",
+        "applied after the iRat defaults and the bag's <name>.frontend.json profile; for logs "
+        "the log's settings, e.g. --frontend score_threshold=0.9",
     )
 
 
-def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
-    """The front-end config: iRat defaults, the bag's profile, then ``--frontend`` overrides."""
-    overrides: dict[str, float] = dict(read_frontend_profile(bag))
-    for item in args.frontend:
+def _overrides(items: list[str]) -> dict[str, float]:
+    overrides: dict[str, float] = {}
+    for item in items:
         key, sep, value = item.partition("=")
         if not sep:
             raise ParameterError(
@@ -97,10 +145,30 @@ def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
             overrides[key.strip()] = float(value)
         except ValueError:
             raise ParameterError(f"--frontend {item!r}: {value!r} is not a number") from None
+    return overrides
+
+
+def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
+    """The front-end config: iRat defaults, the bag's profile, then ``--frontend`` overrides."""
+    overrides: dict[str, float] = dict(read_frontend_profile(bag))
+    overrides.update(_overrides(args.frontend))
     try:
         return FrontEndConfig().with_changes(**overrides)
     except TypeError as exc:
         raise ParameterError(f"--frontend: {exc}") from None
+
+
+def check_frontend_args(args: argparse.Namespace) -> None:
+    """Validate ``--frontend`` overrides before the input's kind is known (either front end)."""
+    overrides = _overrides(args.frontend)
+    errors = []
+    for make in (FrontEndConfig().with_changes, LogSourceConfig().with_changes):
+        try:
+            make(**overrides)
+            return
+        except (CogmapError, TypeError, ValueError) as exc:
+            errors.append(str(exc))
+    raise ParameterError(f"--frontend: {errors[0]}")
 
 
 def resolve_bag(bag: str | None) -> Path:
@@ -108,7 +176,9 @@ def resolve_bag(bag: str | None) -> Path:
     if bag is not None:
         path = Path(bag)
         if not path.exists():
-            raise InputFileError(f"{path}: no such bag; give an existing .bag file or omit BAG")
+            raise InputFileError(
+                f"{path}: no such file; give an existing bag or log file, or omit it"
+            )
         return path
     from cogmap_core.datasets.cache import default_dataset_path
 

@@ -1,7 +1,9 @@
-"""The headless pipeline: a bag through the front end into the three maps, and a report folder.
+"""The headless pipeline: an input through its front end into the three maps, and a report folder.
 
-``HeadlessPipeline(...).run()`` reads as the list of steps it performs; the result object holds
-everything written to the run folder.
+The input is a bag (camera frames through the RatSLAM front end) or a log of odometry and place
+recognition (steps whose events are known, :mod:`cogmap_core.sources`); :func:`open_source` hides
+the difference. ``HeadlessPipeline(...).run()`` reads as the list of steps it performs; the
+result object holds everything written to the run folder.
 """
 
 from __future__ import annotations
@@ -22,18 +24,15 @@ import numpy as np
 from app.plots import map_figure, save_png, size_figure
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagReader, BagTopics, open_bag
+from cogmap_core.datasets import BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError
-from cogmap_core.evaluation import (
-    LAYOUT_RADIUS,
-    TRUE_LOOP_CLOSURE_DISTANCE,
-    TRUE_LOOP_CLOSURE_HEADING,
-    align_rigid_2d,
-)
+from cogmap_core.evaluation import LAYOUT_RADIUS, align_rigid_2d
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
 from cogmap_core.slam import SlamSession, optimisation_summary
+from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
+from cogmap_core.sources.odometry_log import LogReader
 
 MAP_ORDER: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 ProgressCallback = Callable[[int, int, float], None]
@@ -41,13 +40,15 @@ ProgressCallback = Callable[[int, int, float], None]
 
 @dataclass(frozen=True, slots=True)
 class RunOptions:
-    """Everything that defines a headless run besides the bag."""
+    """Everything that defines a headless run besides the input."""
 
     params: MapParams = field(default_factory=MapParams)
     frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
     topics: BagTopics | None = None
     image_scale: int = 4
     force: bool = False
+    format: str | None = None  # bag, tuc, csv; None: detected from the content
+    log: LogOptions = field(default_factory=LogOptions)  # how to read a log
 
 
 @dataclass
@@ -86,10 +87,11 @@ class RunResult:
             f"map within {radius * 100:g} cm of the true path; dead-reckoning ATE "
             f"{fmt(dead_reckoning, '.3f')} m"
         )
+        judged = "position only" if lc.get("tolerance_deg") is None else "position and heading"
         lines.append(
             f"{s['frames']} frames, {s['data_duration_s']:.1f} s of data in {s['wall_s']:.1f} s "
             f"({s['realtime_factor']:.1f}x real time); loop closures {lc['total']} "
-            f"(precision {precision}, position and heading)"
+            f"(precision {precision}, {judged})"
         )
         return "\n".join(lines)
 
@@ -118,20 +120,27 @@ def session_summary(
     last: float,
     wall: float,
     read_warnings: dict[str, Any],
-    layout_radius: float = LAYOUT_RADIUS,
+    layout_radius: float | None = None,
+    source: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The ``summary.json`` of a session: per map sizes, fidelity, accuracy, timings; links.
 
     Args:
         session: the session (its maps and event log).
-        dataset: the bag, as written into the summary.
+        dataset: the input, as written into the summary.
         first: data time of the first frame processed (s).
         last: data time of the last frame processed (s).
         wall: wall time the processing took (s).
         read_warnings: the reader's non-zero problem counters.
-        layout_radius: radius of layout completeness and correctness (m).
+        layout_radius: radius of layout completeness and correctness (m); default: the
+            session's (:attr:`SlamSession.evaluation`).
+        source: what the input is and how it was read (``format``, a log's settings and what
+            became of its loop candidates).
 
     """
+    judging = session.evaluation
+    if layout_radius is None:
+        layout_radius = judging.layout_radius
     duration = max(last - first, 0.0)
     maps: dict[str, Any] = {}
     for mode in MAP_ORDER:
@@ -165,22 +174,15 @@ def session_summary(
         }
     else:
         assert score.position_error is not None and score.heading_error is not None
+        heading = judging.loop_heading
         loops = {
             "total": score.total,
             "true": score.true,
             "false": score.false,
             "precision": score.precision,
-            "tolerance_m": TRUE_LOOP_CLOSURE_DISTANCE,
-            "tolerance_deg": round(math.degrees(TRUE_LOOP_CLOSURE_HEADING), 6),
-            "false_links": [
-                {
-                    "time": round(links[k][0], 6),
-                    "target": links[k][1],
-                    "position_error_m": round(float(score.position_error[k]), 4),
-                    "heading_error_deg": round(math.degrees(float(score.heading_error[k])), 2),
-                }
-                for k in score.false_indices
-            ],
+            "tolerance_m": judging.loop_distance,
+            "tolerance_deg": None if heading is None else round(math.degrees(heading), 6),
+            "false_links": [_false_link(session, links, score, k) for k in score.false_indices],
         }
     dead_reckoning = session.log.dead_reckoning_ate()
     p = session.params
@@ -202,7 +204,36 @@ def session_summary(
         "maps": maps,
         "loop_closures": loops,
         "read_warnings": read_warnings,
+        "source": dict(source or {}),
     }
+
+
+def _false_link(
+    session: SlamSession, links: list[tuple[float, int, float]], score: Any, k: int
+) -> dict[str, Any]:
+    entry: dict[str, Any] = {
+        "time": round(links[k][0], 6),
+        "target": links[k][1],
+        "position_error_m": round(float(score.position_error[k]), 4),
+    }
+    if session.evaluation.loop_heading is not None:
+        entry["heading_error_deg"] = round(math.degrees(float(score.heading_error[k])), 2)
+    link_score = session.log.link_score(k)
+    if link_score is not None:
+        entry["score"] = round(link_score, 6)
+    return entry
+
+
+def source_description(reader: Source) -> dict[str, Any]:
+    """What the input is and how it was read, for the report."""
+    if isinstance(reader, LogReader):
+        return reader.description()
+    return {"format": "bag"}
+
+
+def read_warnings(reader: Source) -> dict[str, Any]:
+    """The reader's non-zero problem counters (``summary.json``'s ``read_warnings``)."""
+    return {k: v for k, v in asdict(reader.counters).items() if k != "frames" and v}
 
 
 def _rounded(value: float) -> float | None:
@@ -229,7 +260,7 @@ def write_sizes_csv(maps: Mapping[MapMode, CognitiveMap], handle: TextIO) -> Non
 
 
 class HeadlessPipeline:
-    """Process a whole bag once and write the report folder."""
+    """Process a whole input (bag or log) once and write the report folder."""
 
     def __init__(
         self,
@@ -238,18 +269,26 @@ class HeadlessPipeline:
         options: RunOptions | None = None,
         progress: ProgressCallback | None = None,
     ) -> None:
-        """Set up a run of ``bag`` into ``out_dir``."""
+        """Set up a run of ``bag`` (a bag or a log) into ``out_dir``."""
         self.bag = Path(bag)
         self.out_dir = Path(out_dir)
         self.options = options or RunOptions()
         self.progress = progress
-        self.frontend = self.options.frontend or frontend_config_for(self.bag)
-        self.session = SlamSession(self.options.params, self.frontend)
+        self.format = resolve_format(self.bag, self.options.format)
+        self.kind = KINDS[self.format]
+        self.frontend = (
+            (self.options.frontend or frontend_config_for(self.bag))
+            if self.kind.has_camera
+            else None
+        )
+        self.session = SlamSession(
+            self.options.params, self.frontend, evaluation=self.kind.evaluation
+        )
         self.files: list[Path] = []
 
     def run(self) -> RunResult:
-        """Open the bag, process every frame, finish the maps, evaluate, write the report."""
-        reader = open_bag(self.bag, self.options.topics, image_scale=self.options.image_scale)
+        """Open the input, process every frame, finish the maps, evaluate, write the report."""
+        reader = self._open_source()
         prepare_out_dir(self.out_dir, self.options.force)
         started = wallclock.perf_counter()
         first, last = self._process_frames(reader)
@@ -265,7 +304,13 @@ class HeadlessPipeline:
         return RunResult(summary, self.out_dir, list(self.files))
 
     # ------------------------------------------------------------------ steps
-    def _process_frames(self, reader: BagReader) -> tuple[float, float]:
+    def _open_source(self) -> Source:
+        o = self.options
+        return open_source(
+            self.bag, self.format, topics=o.topics, image_scale=o.image_scale, log=o.log
+        )
+
+    def _process_frames(self, reader: Source) -> tuple[float, float]:
         first = last = math.nan
         total = reader.info.frame_count
         for frame in reader.frames():
@@ -277,12 +322,18 @@ class HeadlessPipeline:
                 self.progress(frame.index + 1, total, frame.time)
         if math.isnan(first):
             raise InputFileError(f"{self.bag}: no decodable camera frame; nothing to map")
-        self.counters = reader.counters
         return first, last
 
-    def _summary(self, reader: BagReader, first: float, last: float, wall: float) -> dict[str, Any]:
-        warnings = {k: v for k, v in asdict(self.counters).items() if k != "frames" and v}
-        return session_summary(self.session, str(self.bag), first, last, wall, warnings)
+    def _summary(self, reader: Source, first: float, last: float, wall: float) -> dict[str, Any]:
+        return session_summary(
+            self.session,
+            str(self.bag),
+            first,
+            last,
+            wall,
+            read_warnings(reader),
+            source=source_description(reader),
+        )
 
     def _write_json(self, name: str, payload: dict[str, Any]) -> None:
         path = self.out_dir / name
@@ -292,16 +343,19 @@ class HeadlessPipeline:
         self.files.append(path)
 
     def _write_config(self) -> None:
-        self._write_json(
-            "config.json",
-            {
-                "dataset": str(self.bag),
-                "image_scale": self.options.image_scale,
-                "map": self.options.params.to_dict(),
-                "frontend": self.frontend.to_dict(),
-                "topics": asdict(self.options.topics or BagTopics()),
-            },
-        )
+        config: dict[str, Any] = {"dataset": str(self.bag), "format": self.format}
+        config["map"] = self.options.params.to_dict()
+        if self.frontend is not None:
+            config["image_scale"] = self.options.image_scale
+            config["frontend"] = self.frontend.to_dict()
+            config["topics"] = asdict(self.options.topics or BagTopics())
+        else:
+            log = self.options.log
+            config["frontend"] = log.config.to_dict()
+            config["loops"] = None if log.loops is None else str(log.loops)
+            config["ground_truth"] = None if log.ground_truth is None else str(log.ground_truth)
+            config["use_ground_truth"] = log.use_ground_truth
+        self._write_json("config.json", config)
 
     def _write_summary(self, summary: dict[str, Any]) -> None:
         self._write_json("summary.json", summary)
@@ -370,10 +424,10 @@ class HeadlessPipeline:
 def run_headless(
     bag: Path, out_dir: Path, options: RunOptions, progress: ProgressCallback | None = None
 ) -> RunResult:
-    """Library entry of ``cogmap run``: process ``bag`` and write the report into ``out_dir``."""
+    """Library entry of ``cogmap run``: process ``bag`` (or a log) into the report ``out_dir``."""
     try:
         return HeadlessPipeline(bag, out_dir, options, progress).run()
     except CogmapError:
         raise
     except MemoryError:
-        raise CogmapError("out of memory while processing the bag") from None
+        raise CogmapError("out of memory while processing the input") from None
