@@ -9,7 +9,7 @@ from pathlib import Path
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
-from cogmap_core.errors import CogmapError, InputFileError, ParameterError
+from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.sources.detect import FORMATS, KINDS, InputKind, LogOptions, resolve_format
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
@@ -156,19 +156,6 @@ def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
         return FrontEndConfig().with_changes(**overrides)
     except TypeError as exc:
         raise ParameterError(f"--frontend: {exc}") from None
-
-
-def check_frontend_args(args: argparse.Namespace) -> None:
-    """Validate ``--frontend`` overrides before the input's kind is known (either front end)."""
-    overrides = _overrides(args.frontend)
-    errors = []
-    for make in (FrontEndConfig().with_changes, LogSourceConfig().with_changes):
-        try:
-            make(**overrides)
-            return
-        except (CogmapError, TypeError, ValueError) as exc:
-            errors.append(str(exc))
-    raise ParameterError(f"--frontend: {errors[0]}")
 
 
 def resolve_bag(bag: str | None) -> Path:
