@@ -129,7 +129,7 @@ def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
         (
             "malformed line",
             [str(write(tmp / "a.txt", [*ODOM[:3], "odom2 0.3 0.5 0 0"]))],
-            "a.txt:4: a 'odom2' line has 7 numbers after the type, this one 4",
+            "a.txt:4: each 'odom2' line has 7 numbers after the type, this one 4",
         ),
         (
             "odometry going backwards",

@@ -147,7 +147,7 @@ def test_later_frames_start_where_asked(straight: Path) -> None:
 
 
 BAD_TUC = [
-    (["odom2 0 1 0 0 0 0"], ":1: a 'odom2' line has 7 numbers after the type, this one 6"),
+    (["odom2 0 1 0 0 0 0"], ":1: each 'odom2' line has 7 numbers after the type, this one 6"),
     (["odom2 0 1 0 x 0 0 0"], ":1: 'x' in a 'odom2' line is not a number"),
     (["odom2 0 1 0 0 0 0 0", "range 1 2"], ":2: unknown measurement type 'range'"),
     (["odom2 1 1 0 0 0 0 0", "odom2 0.5 1 0 0 0 0 0"], ":2: odometry time 0.500000 s is earlier"),

@@ -52,7 +52,7 @@ def _numbers(path: Path, line_no: int, words: list[str], expected: int) -> list[
     kind = words[0]
     if len(words) - 1 != expected:
         raise LogFormatError(
-            f"{path}:{line_no}: a '{kind}' line has {expected} numbers after the type, this one "
+            f"{path}:{line_no}: each '{kind}' line has {expected} numbers after the type, this one "
             f"{len(words) - 1}; fix or drop the line"
         )
     try:
