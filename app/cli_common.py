@@ -32,8 +32,11 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
     )
 
 
+_PAPER_FLAGS = ("alpha", "beta", "delta", "t_interval", "t_total")
+
+
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``."""
+    """The paper's map parameters as flags, every other one with ``--param NAME=VALUE``."""
     d = MapParams()
     parser.add_argument(
         "--alpha",
@@ -59,17 +62,31 @@ def add_map_arguments(parser: argparse.ArgumentParser) -> None:
         default=d.t_total,
         help=f"cluster total-time threshold (s), > 0 (default {d.t_total:g})",
     )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="any other map parameter (repeatable), e.g. --param integration_radius=0.08; "
+        f"names: {', '.join(n for n in d.to_dict() if n not in _PAPER_FLAGS)}",
+    )
 
 
 def params_from_args(args: argparse.Namespace) -> MapParams:
     """Map parameters from the command line (out-of-range values name the valid range)."""
-    return MapParams(
-        alpha=args.alpha,
-        beta=args.beta,
-        delta=args.delta,
-        t_interval=args.t_interval,
-        t_total=args.t_total,
-    )
+    values: dict[str, float] = {name: getattr(args, name) for name in _PAPER_FLAGS}
+    for item in getattr(args, "param", []) or []:
+        name, sep, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or not name:
+            raise ParameterError(f"--param {item!r}: expected NAME=VALUE, e.g. huber_scale=0.2")
+        if name in _PAPER_FLAGS:
+            raise ParameterError(f"--param {name}: use --{name.replace('_', '-')} instead")
+        try:
+            values[name] = float(text)
+        except ValueError:
+            raise ParameterError(f"--param {name}={text!r}: the value is not a number") from None
+    return MapParams().with_changes(**values)
 
 
 def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:
