@@ -499,7 +499,7 @@ class CogmapApp:
     def _publish_scene(self) -> None:
         session = self.replay.session
         log = session.log
-        truth = log.ground_truth if log.ground_truth else None
+        truth = log.ground_truth if len(log.ground_truth) else None
         count = min(self.replay.cursor, len(log.ground_truth))
         self.streamer.publish(dict(session.maps.maps), truth, count)
 
