@@ -32,44 +32,42 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
     )
 
 
+_MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
+    ("alpha", "--alpha", "translation weight >= 0"),
+    ("beta", "--beta", "rotation weight, >= 0"),
+    ("delta", "--delta", "field threshold, > 1"),
+    ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
+    ("t_total", "--t-total", "cluster total-time threshold (s), > 0"),
+)
+
+
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``."""
+    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``.
+
+    Unset ones stay ``None`` (see :func:`map_changes_from_args`): a resumed session keeps its
+    own values for them.
+    """
     d = MapParams()
-    parser.add_argument(
-        "--alpha",
-        type=float,
-        default=d.alpha,
-        help=f"translation weight >= 0 (default {d.alpha:g})",
-    )
-    parser.add_argument(
-        "--beta", type=float, default=d.beta, help=f"rotation weight, >= 0 (default {d.beta:g})"
-    )
-    parser.add_argument(
-        "--delta", type=float, default=d.delta, help=f"field threshold, > 1 (default {d.delta:g})"
-    )
-    parser.add_argument(
-        "--t-interval",
-        type=float,
-        default=d.t_interval,
-        help=f"cluster interval threshold (s), > 0 (default {d.t_interval:g})",
-    )
-    parser.add_argument(
-        "--t-total",
-        type=float,
-        default=d.t_total,
-        help=f"cluster total-time threshold (s), > 0 (default {d.t_total:g})",
-    )
+    for name, flag, meaning in _MAP_ARGUMENTS:
+        parser.add_argument(
+            flag, type=float, default=None, help=f"{meaning} (default {getattr(d, name):g})"
+        )
+
+
+def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
+    """The map parameters given on the command line (name -> value), validated."""
+    changes = {
+        name: getattr(args, name)
+        for name, _, _ in _MAP_ARGUMENTS
+        if getattr(args, name, None) is not None
+    }
+    MapParams().with_changes(**changes)  # out-of-range values name the valid range
+    return changes
 
 
 def params_from_args(args: argparse.Namespace) -> MapParams:
     """Map parameters from the command line (out-of-range values name the valid range)."""
-    return MapParams(
-        alpha=args.alpha,
-        beta=args.beta,
-        delta=args.delta,
-        t_interval=args.t_interval,
-        t_total=args.t_total,
-    )
+    return MapParams().with_changes(**map_changes_from_args(args))
 
 
 def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:

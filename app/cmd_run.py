@@ -10,22 +10,29 @@ from app.cli_common import (
     add_map_arguments,
     add_topic_arguments,
     frontend_from_args,
+    map_changes_from_args,
     params_from_args,
     resolve_bag,
     topics_from_args,
 )
 from app.pipeline import RunOptions, run_headless
 from app.progress import ProgressBar
+from cogmap_core.errors import ParameterError
 
 
 def _run(args: argparse.Namespace) -> int:
     params = params_from_args(args)  # validate before any work
+    if args.resume is not None and args.bag is None:
+        raise ParameterError("--resume needs a bag to continue on: cogmap run BAG --resume FILE")
     bag = resolve_bag(args.bag)
     options = RunOptions(
         params=params,
         frontend=frontend_from_args(args, bag),
         topics=topics_from_args(args),
         force=args.force,
+        resume=None if args.resume is None else Path(args.resume),
+        param_changes=map_changes_from_args(args),
+        save_session=None if args.save_session is None else Path(args.save_session),
     )
     bar = ProgressBar("cogmap run")
     try:
@@ -33,6 +40,8 @@ def _run(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     print(result.table())
+    for note in result.session_notes:
+        print(note)
     print(f"report written to {result.out_dir}")
     return 0
 
@@ -45,11 +54,30 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Process the whole bag (default: the built-in dataset) through the front end "
         "and build the standard, scene_integration and compact maps. Writes summary.json, "
         "sizes.csv, size.png, map.png, <map>.g2o, trajectory_tum.txt (+ groundtruth_tum.txt) "
-        "and config.json into DIR.",
+        "and config.json into DIR. With --save-session FILE the SLAM state is saved at the end; "
+        "cogmap run BAG2 --resume FILE continues it on another bag.",
     )
     parser.add_argument("bag", nargs="?", default=None, metavar="BAG", help="iRat-layout ROS bag")
     parser.add_argument("--out", required=True, metavar="DIR", help="report folder")
-    parser.add_argument("--force", action="store_true", help="overwrite a non-empty DIR")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite a non-empty DIR (and an existing --save-session FILE)",
+    )
+    parser.add_argument(
+        "--save-session",
+        default=None,
+        metavar="FILE",
+        help="save the whole SLAM state at the end of the data, to continue it later with "
+        "--resume (see docs/sessions.md)",
+    )
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="FILE",
+        help="continue a saved session on BAG: the robot starts BAG where the session ended; "
+        "map options given here replace the session's (its maps are rebuilt)",
+    )
     add_map_arguments(parser)
     add_frontend_arguments(parser)
     add_topic_arguments(parser)
