@@ -33,13 +33,7 @@ from cogmap_core.evaluation import (
 )
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
-from cogmap_core.session_file import (
-    SessionError,
-    SessionMeta,
-    check_resumable,
-    load_session,
-    save_session,
-)
+from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
 
@@ -285,16 +279,9 @@ class HeadlessPipeline:
     def _resume(self, path: Path) -> SlamSession:
         """Load the session to continue (refused before anything is written)."""
         started = wallclock.perf_counter()
-        session, meta = load_session(path)
-        check_resumable(path, session, meta, self.frontend, self.options.image_scale)
-        if session.finished:
-            raise SessionError(
-                f"{path}: the session was saved after its final optimisation and cannot be "
-                "continued exactly; save sessions with cogmap run --save-session"
-            )
-        params = session.params.with_changes(**dict(self.options.param_changes))
-        if params != session.params:
-            session.adopt(params, session.rebuild(params, finish=False))
+        session, meta = resume_session(
+            path, self.frontend, self.options.image_scale, self.options.param_changes
+        )
         self.meta = meta
         self.session_notes.append(
             f"resumed {path} in {wallclock.perf_counter() - started:.2f} s: "

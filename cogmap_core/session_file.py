@@ -34,6 +34,7 @@ import math
 import os
 import tempfile
 import zipfile
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -608,6 +609,34 @@ def check_resumable(
         )
 
 
+def resume_session(
+    path: Path | str,
+    frontend: FrontEndConfig,
+    image_scale: int,
+    param_changes: Mapping[str, float] | None = None,
+) -> tuple[SlamSession, SessionMeta]:
+    """Load a session to continue with these front-end settings and map parameter changes.
+
+    The maps are rebuilt from the session's events when the changes alter its parameters.
+
+    Raises:
+        SessionError: unreadable file, other front-end settings or decode scale, or a session
+            saved after its final optimisation.
+
+    """
+    session, meta = load_session(path)
+    check_resumable(path, session, meta, frontend, image_scale)
+    if session.finished:
+        raise SessionError(
+            f"{path}: the session was saved after its final optimisation and cannot be continued "
+            "exactly; save sessions with cogmap run --save-session"
+        )
+    params = session.params.with_changes(**dict(param_changes or {}))
+    if params != session.params:
+        session.adopt(params, session.rebuild(params, finish=False))
+    return session, meta
+
+
 def same_state(a: SlamSession, b: SlamSession) -> bool:
     """Whether two sessions hold exactly the same state (what a session file would hold).
 
@@ -658,6 +687,7 @@ __all__: list[str] = [
     "describe",
     "frontend_mismatch",
     "load_session",
+    "resume_session",
     "same_state",
     "save_session",
 ]

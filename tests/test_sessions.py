@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import bisect
+import copy
 import json
 import shutil
 import zipfile
@@ -12,6 +14,7 @@ import pytest
 from rosbags.rosbag1 import Reader
 
 from app.cli import main
+from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import MazeConfig, generate_maze_bag, open_bag
 from cogmap_core.datasets.bag_writer import IratBagWriter
@@ -28,10 +31,12 @@ from cogmap_core.session_file import (
     SessionError,
     SessionMeta,
     load_session,
+    resume_session,
     same_state,
     save_session,
 )
 from cogmap_core.slam import SlamSession
+from tests.test_server_support import assert_same_map, counter, running_app
 
 # 2 x 2 laps of the figure eight at 8 frames per second: about 2000 frames in all
 CONFIG = MazeConfig(layout="figure_eight", laps=4, seed=3, fps=8.0)
@@ -123,15 +128,55 @@ def test_resumed_maps_equal_one_run_over_both_bags(resumed: Path, back_to_back: 
     assert meta.bags[1]["offset"] > day1.log.frame_time[-1]  # the bags' own clocks
     # the day-2 report is the report of the whole run
     summary = json.loads((resumed / "r2" / "summary.json").read_text())
-    back_to_back.finish()
-    try:
+    finished = copy.deepcopy(back_to_back)
+    finished.finish()
+    for mode in MapMode:
+        cmap = finished.maps[mode]
+        entry = summary["maps"][mode.value]
+        assert (entry["vertices"], entry["edges"]) == (cmap.num_vertices, cmap.num_edges)
+    assert summary["frames"] == finished.log.frames
+
+
+def test_serve_shows_the_resumed_maps_and_keeps_growing_them(
+    resumed: Path, days: tuple[Path, Path], back_to_back: SlamSession
+) -> None:
+    _, day2 = days
+    day1_session, meta = load_session(resumed / "day1.session.npz")
+    resume = resume_session(resumed / "day1.session.npz", frontend_config_for(day2), 4)
+    base = day1_session.log.frames
+    with running_app(day2, autoplay=False, resume=resume) as app:
+        r = app.replay
+        assert r.wait_idle(60)
+        assert r.cursor == base and r.state is PlaybackState.PAUSED
+        for mode in MapMode:  # the resumed maps, shown at once
+            assert_same_map(r.session.maps[mode], day1_session.maps[mode])
+        assert counter(app, "vertices") == str(day1_session.maps[MapMode.COMPACT].num_vertices)
+        app.play_button.value = True
+        assert r.wait_idle(60) and r.state is PlaybackState.ENDED
+        assert r.cursor == back_to_back.log.frames == r.total_frames
+        finished = copy.deepcopy(back_to_back)
+        finished.finish()
+        for mode in MapMode:  # grown with day 2 exactly as one run over both bags
+            assert_same_map(r.session.maps[mode], finished.maps[mode])
+        offset = r.time_offset
+        assert offset == meta.resume_offset(
+            open_bag(day2).start_stamp, day1_session.log.frame_time[-1]
+        )
+        # seeking is in bag time; the maps are those of the whole run up to that frame
+        r.pause()  # (a seek while playing plays on from there)
+        r.seek(30.0)
+        assert r.wait_idle(60)
+        k = bisect.bisect_right(back_to_back.log.frame_time, 30.0 + offset)
+        assert r.cursor == k > base and abs(r.frame_time - 30.0) < 1.0
+        expected = back_to_back.rebuild(back_to_back.params, frames=k, finish=False)
         for mode in MapMode:
-            cmap = back_to_back.maps[mode]
-            entry = summary["maps"][mode.value]
-            assert (entry["vertices"], entry["edges"]) == (cmap.num_vertices, cmap.num_edges)
-        assert summary["frames"] == back_to_back.log.frames
-    finally:
-        back_to_back.finished = False
+            assert_same_map(r.session.maps[mode], expected[mode])
+        r.restart()  # back to the resumed state, not before it
+        assert r.wait_idle(60)
+        assert r.cursor == base
+        for mode in MapMode:
+            assert_same_map(r.session.maps[mode], day1_session.maps[mode])
+        assert r.session.frontend.frames == back_to_back.frontend.frames  # no frame seen twice
 
 
 def test_session_survives_a_round_trip_mid_run(days: tuple[Path, Path], tmp_path: Path) -> None:
@@ -370,3 +415,16 @@ def test_the_session_format_knows_every_attribute() -> None:
         "_cos_sin", "_e_th_t", "_e_xy", "_e_xy_t", "_i_th_t", "_i_xy", "_i_xy_t", "_perm_th_t",
         "_perm_xy", "_sin", "_sincos_th", "_sincos_xy",
     }  # fmt: skip
+
+
+def test_serve_refuses_a_bad_resume_before_serving(
+    days: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _, day2 = days
+    assert main(["serve", "--resume", str(tmp_path / "s.npz")]) == 2
+    assert "--resume needs a bag" in capsys.readouterr().err
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"PK\x03\x04 not really")
+    assert main(["serve", str(day2), "--resume", str(bad), "--port", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "not a readable cogmap session file" in err
