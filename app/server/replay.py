@@ -17,6 +17,7 @@ the maps from another thread takes :attr:`Replay.lock`.
 
 from __future__ import annotations
 
+import array
 import bisect
 import copy
 import math
@@ -218,7 +219,8 @@ class Replay:
         self.reader: BagReader | None = None
         self.duration = 0.0
         self.total_frames = 0
-        self.view_templates: list[int | None] = []
+        # per frame of the bag, the view template it matched (-1: none); 8 bytes a frame
+        self.view_templates = array.array("q")
         self.rebuilds: list[RebuildRecord] = []
         self.frame_time = math.nan  # data time of the last frame applied
         self.processing_s = 0.0  # wall time spent applying frames (front end + maps)
@@ -570,10 +572,11 @@ class Replay:
                 lo = log.frame_end[k - 1] if k else 0
                 for event in log.events[lo : log.frame_end[k]]:
                     session.maps.apply(event)
-                view = self.view_templates[k - self.base_frames]
+                matched = self.view_templates[k - self.base_frames]
+                view = None if matched < 0 else matched
             else:
                 out = session.process(frame)
-                self.view_templates.append(out.view_template)
+                self.view_templates.append(-1 if out.view_template is None else out.view_template)
                 view = out.view_template
             self.cursor = k + 1
             self.frame_time = self._bag_time(frame.time)
