@@ -32,36 +32,27 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
     )
 
 
-_PAPER_FLAGS = ("alpha", "beta", "delta", "t_interval", "t_total")
+_MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
+    ("alpha", "--alpha", "translation weight >= 0"),
+    ("beta", "--beta", "rotation weight, >= 0"),
+    ("delta", "--delta", "field threshold, > 1"),
+    ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
+    ("t_total", "--t-total", "cluster total-time threshold (s), > 0"),
+)
+_PAPER_FLAGS = tuple(name for name, _, _ in _MAP_ARGUMENTS)
 
 
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters as flags, every other one with ``--param NAME=VALUE``."""
+    """The paper's map parameters as flags, every other one with ``--param NAME=VALUE``.
+
+    Unset ones stay unset (see :func:`map_changes_from_args`): a resumed session keeps its own
+    values for them.
+    """
     d = MapParams()
-    parser.add_argument(
-        "--alpha",
-        type=float,
-        default=d.alpha,
-        help=f"translation weight >= 0 (default {d.alpha:g})",
-    )
-    parser.add_argument(
-        "--beta", type=float, default=d.beta, help=f"rotation weight, >= 0 (default {d.beta:g})"
-    )
-    parser.add_argument(
-        "--delta", type=float, default=d.delta, help=f"field threshold, > 1 (default {d.delta:g})"
-    )
-    parser.add_argument(
-        "--t-interval",
-        type=float,
-        default=d.t_interval,
-        help=f"cluster interval threshold (s), > 0 (default {d.t_interval:g})",
-    )
-    parser.add_argument(
-        "--t-total",
-        type=float,
-        default=d.t_total,
-        help=f"cluster total-time threshold (s), > 0 (default {d.t_total:g})",
-    )
+    for name, flag, meaning in _MAP_ARGUMENTS:
+        parser.add_argument(
+            flag, type=float, default=None, help=f"{meaning} (default {getattr(d, name):g})"
+        )
     parser.add_argument(
         "--param",
         action="append",
@@ -72,9 +63,13 @@ def add_map_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def params_from_args(args: argparse.Namespace) -> MapParams:
-    """Map parameters from the command line (out-of-range values name the valid range)."""
-    values: dict[str, float] = {name: getattr(args, name) for name in _PAPER_FLAGS}
+def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
+    """The map parameters given on the command line (name -> value), validated."""
+    changes: dict[str, float] = {
+        name: getattr(args, name)
+        for name, _, _ in _MAP_ARGUMENTS
+        if getattr(args, name, None) is not None
+    }
     for item in getattr(args, "param", []) or []:
         name, sep, text = item.partition("=")
         name = name.strip().replace("-", "_")
@@ -83,10 +78,16 @@ def params_from_args(args: argparse.Namespace) -> MapParams:
         if name in _PAPER_FLAGS:
             raise ParameterError(f"--param {name}: use --{name.replace('_', '-')} instead")
         try:
-            values[name] = float(text)
+            changes[name] = float(text)
         except ValueError:
             raise ParameterError(f"--param {name}={text!r}: the value is not a number") from None
-    return MapParams().with_changes(**values)
+    MapParams().with_changes(**changes)  # out-of-range values name the valid range
+    return changes
+
+
+def params_from_args(args: argparse.Namespace) -> MapParams:
+    """Map parameters from the command line (out-of-range values name the valid range)."""
+    return MapParams().with_changes(**map_changes_from_args(args))
 
 
 def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:

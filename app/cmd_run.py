@@ -11,16 +11,20 @@ from app.cli_common import (
     add_map_arguments,
     add_topic_arguments,
     frontend_from_args,
+    map_changes_from_args,
     params_from_args,
     resolve_bag,
     topics_from_args,
 )
 from app.pipeline import RunOptions, run_headless
 from app.progress import ProgressBar
+from cogmap_core.errors import ParameterError
 
 
 def _run(args: argparse.Namespace) -> int:
     params = params_from_args(args)  # validate before any work
+    if args.resume is not None and args.bag is None:
+        raise ParameterError("--resume needs a bag to continue on: cogmap run BAG --resume FILE")
     bag = resolve_bag(args.bag)
     options = RunOptions(
         params=params,
@@ -29,6 +33,9 @@ def _run(args: argparse.Namespace) -> int:
         force=args.force,
         on_clock_jump=args.on_clock_jump,
         until_error=args.until_error,
+        resume=None if args.resume is None else Path(args.resume),
+        param_changes=map_changes_from_args(args),
+        save_session=None if args.save_session is None else Path(args.save_session),
     )
     bar = ProgressBar("cogmap run")
 
@@ -43,6 +50,8 @@ def _run(args: argparse.Namespace) -> int:
     print(result.table())
     for line in result.warnings:
         print(f"warning: {line}")
+    for note in result.session_notes:
+        print(note)
     print(f"report written to {result.out_dir}")
     return 0
 
@@ -55,7 +64,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Process the whole bag (default: the built-in dataset) through the front end "
         "and build the standard, scene_integration and compact maps. Writes summary.json, "
         "sizes.csv, size.png, map.png, <map>.g2o, trajectory_tum.txt (+ groundtruth_tum.txt) "
-        "and config.json into DIR.",
+        "and config.json into DIR. With --save-session FILE the SLAM state is saved at the end; "
+        "cogmap run BAG2 --resume FILE continues it on another bag.",
     )
     parser.add_argument("bag", nargs="?", default=None, metavar="BAG", help="iRat-layout ROS bag")
     parser.add_argument("--out", required=True, metavar="DIR", help="report folder")
@@ -63,7 +73,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--force",
         action="store_true",
         help="write into a non-empty DIR: replaces only the report's own files (listed in "
-        "DIR/.cogmap-report), once the new report is complete; nothing else in DIR is touched",
+        "DIR/.cogmap-report), once the new report is complete; nothing else in DIR is touched; "
+        "also replaces an existing --save-session FILE",
     )
     parser.add_argument(
         "--on-clock-jump",
@@ -77,6 +88,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="a bag corrupt part-way: map the data before the damage and write the report "
         "(the damage is reported) instead of failing",
+    )
+    parser.add_argument(
+        "--save-session",
+        default=None,
+        metavar="FILE",
+        help="save the whole SLAM state at the end of the data, to continue it later with "
+        "--resume (see docs/sessions.md)",
+    )
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="FILE",
+        help="continue a saved session on BAG: the robot starts BAG where the session ended; "
+        "map options given here replace the session's (its maps are rebuilt)",
     )
     add_map_arguments(parser)
     add_frontend_arguments(parser)

@@ -16,11 +16,13 @@ from app.cli_common import (
     add_map_arguments,
     add_topic_arguments,
     frontend_from_args,
+    map_changes_from_args,
     params_from_args,
     topics_from_args,
 )
 from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.session_file import describe, resume_session
 
 DEFAULT_PORT = 8080
 
@@ -64,6 +66,19 @@ def _serve(args: argparse.Namespace) -> int:
     frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile read)
     if not 0 < args.port < 65536:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
+    resume = None
+    if args.resume is not None:
+        if args.bag is None:
+            raise ParameterError(
+                "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
+            )
+        bag_path = Path(args.bag)
+        if not bag_path.exists():
+            raise InputFileError(f"{bag_path}: no such bag; give an existing .bag file")
+        resume = resume_session(
+            args.resume, frontend_from_args(args, bag_path), 4, map_changes_from_args(args)
+        )
+        print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     import viser
 
     from app.server.app import CogmapApp
@@ -84,6 +99,7 @@ def _serve(args: argparse.Namespace) -> int:
         static_dir=Path(args.static) if args.static else None,
         frontend=lambda bag_path: frontend_from_args(args, bag_path),
         topics=topics,
+        resume=resume,
     )
     stop = threading.Event()
 
@@ -139,6 +155,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="playback speed: data seconds per second, or 'max' (default 1)",
     )
     parser.add_argument("--paused", action="store_true", help="start paused")
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="FILE",
+        help="show a session saved by cogmap run --save-session and keep growing it with BAG "
+        "(the robot starts BAG where the session ended)",
+    )
     parser.add_argument(
         "--static",
         default=None,

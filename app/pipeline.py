@@ -11,7 +11,7 @@ import json
 import math
 import time as wallclock
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -30,8 +30,11 @@ from cogmap_core.evaluation import (
     TRUE_LOOP_CLOSURE_HEADING,
     align_rigid_2d,
 )
+from cogmap_core.fileio import check_writable
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
+from cogmap_core.session_file import SessionMeta, resume_session, save_session
+from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
 
 MAP_ORDER: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
@@ -51,7 +54,22 @@ ProgressCallback = Callable[[int, int, float], None]
 
 @dataclass(frozen=True, slots=True)
 class RunOptions:
-    """Everything that defines a headless run besides the bag."""
+    """Everything that defines a headless run besides the bag.
+
+    Attributes:
+        params: map parameters of a new session.
+        frontend: front-end settings (None: iRat defaults + the bag's profile).
+        topics: the bag's topics (None: the iRat bag's).
+        image_scale: JPEG decode reduction.
+        force: overwrite a non-empty report folder and an existing ``save_session`` file.
+        resume: continue the session saved in this file (its front end, maps and data time);
+            the bag's frames follow the session's as if the bags were one.
+        param_changes: with ``resume``, map parameters that replace the session's (its maps
+            are then rebuilt from its events).
+        save_session: write the session to this file at the end of the data (before the final
+            optimisation, so that a resumed run continues exactly where this one stopped).
+
+    """
 
     params: MapParams = field(default_factory=MapParams)
     frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
@@ -60,6 +78,9 @@ class RunOptions:
     force: bool = False
     on_clock_jump: str = "drop"  # or "stop": see cogmap_core.datasets.rosbag_reader
     until_error: bool = False  # a bag corrupt part-way: map what comes before the damage
+    resume: Path | None = None
+    param_changes: Mapping[str, float] = field(default_factory=dict)
+    save_session: Path | None = None
 
 
 @dataclass
@@ -70,6 +91,7 @@ class RunResult:
     out_dir: Path
     files: list[Path]
     warnings: list[str] = field(default_factory=list)  # the reader's, one line each
+    session_notes: list[str] = field(default_factory=list)
 
     def table(self) -> str:
         """A compact one-line-per-map summary table."""
@@ -246,8 +268,29 @@ class HeadlessPipeline:
         self.progress = progress
         self.announce = announce
         self.frontend = self.options.frontend or frontend_config_for(self.bag)
-        self.session = SlamSession(self.options.params, self.frontend)
         self.files: list[Path] = []
+        self.session_notes: list[str] = []
+        options = self.options
+        if options.save_session is not None:
+            check_session_target(options.save_session, options.force)
+        self.meta: SessionMeta | None = None
+        if options.resume is not None:
+            self.session = self._resume(options.resume)
+        else:
+            self.session = SlamSession(options.params, self.frontend)
+
+    def _resume(self, path: Path) -> SlamSession:
+        """Load the session to continue (refused before anything is written)."""
+        started = wallclock.perf_counter()
+        session, meta = resume_session(
+            path, self.frontend, self.options.image_scale, self.options.param_changes
+        )
+        self.meta = meta
+        self.session_notes.append(
+            f"resumed {path} in {wallclock.perf_counter() - started:.2f} s: "
+            f"{session_description(meta, session)}"
+        )
+        return session
 
     def run(self) -> RunResult:
         """Open the bag, check the output, process every frame, evaluate, write the report."""
@@ -255,8 +298,29 @@ class HeadlessPipeline:
             self._open_bag() as reader,
             ReportFolder(self.out_dir, REPORT_FILES, self.options.force) as report,
         ):
+            log = self.session.log
+            end = float(log.frame_time[-1]) if log.frames else 0.0
+            if self.meta is None:
+                self.meta = SessionMeta(
+                    epoch=reader.start_stamp, image_scale=self.options.image_scale
+                )
+                offset = 0.0
+            else:
+                offset = self.meta.resume_offset(reader.start_stamp, end)
             started = wallclock.perf_counter()
-            first, last = self._process_frames(reader)
+            frames_before = log.frames
+            first, last = self._process_frames(reader, offset)
+            self.meta.bags.append(
+                {
+                    "bag": str(self.bag),
+                    "offset": offset,
+                    "frames": self.session.log.frames - frames_before,
+                    "first": first,
+                    "last": last,
+                }
+            )
+            if self.options.save_session is not None:
+                self._save_session(self.options.save_session)
             self.session.finish()
             wall = wallclock.perf_counter() - started
             summary = self._summary(reader, first, last, wall)
@@ -269,7 +333,9 @@ class HeadlessPipeline:
                 self._write_trajectories(report)
                 self._write_figures(report, last, summary)
             self.files = report.commit()
-        return RunResult(summary, report.out_dir, list(self.files), reader.warnings)
+        return RunResult(
+            summary, report.out_dir, list(self.files), reader.warnings, list(self.session_notes)
+        )
 
     # ------------------------------------------------------------------ steps
     def _announce(self, message: str) -> None:
@@ -300,10 +366,13 @@ class HeadlessPipeline:
                 f"use a camera topic with images of at least {need_w}x{need_h} px"
             )
 
-    def _process_frames(self, reader: BagReader) -> tuple[float, float]:
+    def _process_frames(self, reader: BagReader, offset: float = 0.0) -> tuple[float, float]:
+        """Every frame through the session, placed at ``offset`` + its time in the bag."""
         first = last = math.nan
         total = reader.info.frame_count
         for frame in reader.frames():
+            if offset:
+                frame = replace(frame, time=frame.time + offset)
             if math.isnan(first):
                 self._check_image_size(frame.image)
                 first = frame.time
@@ -315,6 +384,16 @@ class HeadlessPipeline:
             raise InputFileError(f"{self.bag}: no decodable camera frame; nothing to map")
         self.counters = reader.counters
         return first, last
+
+    def _save_session(self, path: Path) -> None:
+        assert self.meta is not None
+        started = wallclock.perf_counter()
+        save_session(path, self.session, self.meta)
+        self.session_notes.append(
+            f"session saved to {path} ({path.stat().st_size / 1e6:.1f} MB) in "
+            f"{wallclock.perf_counter() - started:.2f} s: "
+            f"{session_description(self.meta, self.session)}"
+        )
 
     def _summary(self, reader: BagReader, first: float, last: float, wall: float) -> dict[str, Any]:
         warnings = {k: v for k, v in asdict(self.counters).items() if k != "frames" and v}
@@ -395,6 +474,20 @@ class HeadlessPipeline:
                     f"correctness {entry['correctness']:.3f}"
                 )
         save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
+
+
+def check_session_target(path: Path, force: bool) -> None:
+    """Refuse a session file target that would fail only at the end of a long run."""
+    if path.is_dir():
+        raise InputFileError(f"{path} is a directory; give --save-session a file name")
+    if path.exists() and not force:
+        raise InputFileError(
+            f"{path} already exists; choose another --save-session file or pass --force to "
+            "overwrite it"
+        )
+    if not path.parent.is_dir():
+        raise InputFileError(f"folder {path.parent} of --save-session does not exist; create it")
+    check_writable(path.parent)  # a probe file: mode bits do not stop root
 
 
 def run_headless(

@@ -47,6 +47,8 @@ from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.evaluation import LayoutFidelity
 from cogmap_core.events import LinkToVertex
 from cogmap_core.frames import Frame
+from cogmap_core.session_file import SessionMeta
+from cogmap_core.slam import SlamSession
 
 log = logging.getLogger(__name__)
 
@@ -142,6 +144,8 @@ class CogmapApp:
         scene_hz: maximum map updates per second during playback.
         image_scale: JPEG decode reduction (1, 2, 4, 8).
         topics: the bag's topic names.
+        resume: a loaded session to show and continue on the bag (see :class:`Replay`); its
+            parameters are the sliders' initial values.
 
     """
 
@@ -157,6 +161,7 @@ class CogmapApp:
         scene_hz: float = 10.0,
         image_scale: int = 4,
         topics: BagTopics | None = None,
+        resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
         for spec in SLIDERS + ADVANCED_SLIDERS:
@@ -188,7 +193,10 @@ class CogmapApp:
             autoplay=autoplay,
             image_scale=image_scale,
             topics=topics,
+            resume=resume,
         )
+        if resume is not None:
+            params = resume[0].params
         self.streamer = SceneStreamer(server)
         self._build_gui(params or MapParams(), speed, autoplay)
         self._guard_inputs()
@@ -542,7 +550,7 @@ class CogmapApp:
     def _publish_scene(self) -> None:
         session = self.replay.session
         log = session.log
-        truth = log.ground_truth if log.ground_truth else None
+        truth = log.ground_truth if len(log.ground_truth) else None
         count = min(self.replay.cursor, len(log.ground_truth))
         self.streamer.publish(dict(session.maps.maps), truth, count)
 
@@ -683,7 +691,8 @@ class CogmapApp:
         session = self.replay.session
         order = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
         histories = [session.maps[m].size_history() for m in order]
-        end = 0.0 if math.isnan(self.replay.frame_time) else self.replay.frame_time
+        end = self.replay.data_time  # session data time (the bag's time when not resuming)
+        end = 0.0 if math.isnan(end) else end
         times = np.linspace(0.0, max(end, 1e-3), CHART_POINTS)
         data: list[np.ndarray] = [times]
         for t, v, e in histories:

@@ -27,7 +27,7 @@ from app.server.scene import SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
-from cogmap_core.events import LinkToVertex, MapEvent, Odometry
+from cogmap_core.events import MapEvent, Odometry
 from cogmap_core.fileio import check_writable, output_error, write_text_atomic
 from cogmap_core.g2o import format_g2o
 from cogmap_core.slam import EventLog, SlamSession
@@ -60,18 +60,7 @@ def g2o_bytes(cmap: CognitiveMap) -> bytes:
 
 def truncated_log(log: EventLog, frames: int) -> EventLog:
     """A copy of the first ``frames`` frames of ``log``."""
-    frames = max(0, min(frames, log.frames))
-    end = log.frame_end[frames - 1] if frames else 0
-    events = list(log.events[:end])
-    links = sum(1 for e in events if isinstance(e, LinkToVertex))
-    truth = log.ground_truth[:frames] if log.has_ground_truth() else list(log.ground_truth)
-    return EventLog(
-        events=events,
-        frame_end=list(log.frame_end[:frames]),
-        frame_time=list(log.frame_time[:frames]),
-        ground_truth=list(truth),
-        link_robot_truth=list(log.link_robot_truth[:links]),
-    )
+    return log.truncated(frames)
 
 
 def view_session(replay: Replay) -> SlamSession:
@@ -91,8 +80,8 @@ def summary_dict(replay: Replay) -> dict[str, object]:
     """``summary.json`` of the frames replayed so far (call with ``replay.lock`` held)."""
     view = view_session(replay)
     times = view.log.frame_time
-    first = times[0] if times else 0.0
-    last = times[-1] if times else 0.0
+    first = float(times[0]) if len(times) else 0.0
+    last = float(times[-1]) if len(times) else 0.0
     warnings: dict[str, object] = {}
     if replay.reader is not None:
         counters = replay.reader.counters
