@@ -3,12 +3,15 @@
 "Due to motion noise and measuring error, redundant vertices might be created. After loop
 closures, extra constraints also need to be removed. These points represent same information.
 One of these points will be kept, and others are removed." After each batch optimisation, every
-edge whose two vertices lie closer than ``short_edge_threshold`` is contracted: the edge's first
-vertex is removed (the paper's figure removes ``e_{i+1}`` of the short edge ``e_{i+1,i+2}``) and
-its edges re-attached to the second, with the optimised relative pose -- the same rule as scene
-integration -- so cases A (two edges merged into one), B and C (multiple constraints between the
-two: the redundant ones dropped) follow. The map's first vertex anchors the map and is never
-removed (the other end is removed instead). Edges made short by a contraction are checked too.
+edge whose two vertices lie closer than ``short_edge_threshold`` is contracted: one end is
+removed and its edges re-attached to the other, with the optimised relative pose -- the same rule
+as scene integration -- so cases A (two edges merged into one), B and C (multiple constraints
+between the two: the redundant ones dropped) follow. As in the paper's figure, the edge's first
+vertex is removed (``e_{i+1}`` of ``e_{i+1,i+2}``: two vertices made moments apart) -- unless it
+is known ground for the other, made at least ``known_age`` seconds before it: a short edge can
+join an old place to one made laps later, and the old one is kept so that the map's known ground
+stays known, as scene integration merges new into old. The map's first vertex anchors the map and
+is never removed. Edges made short by a contraction are checked too.
 """
 
 from __future__ import annotations
@@ -20,8 +23,11 @@ from cogmap_core.geometry import between
 from cogmap_core.map_graph import MapGraph
 
 
-def remove_short_edges(graph: MapGraph, threshold: float) -> int:
-    """Contract edges shorter than ``threshold`` (m) on the current poses; return removals."""
+def remove_short_edges(graph: MapGraph, threshold: float, known_age: float) -> int:
+    """Contract edges shorter than ``threshold`` (m) on the current poses; return removals.
+
+    ``known_age``: a vertex this many seconds older than the other end is kept (module doc).
+    """
     if threshold <= 0:
         return 0
     pose = graph.pose
@@ -38,7 +44,9 @@ def remove_short_edges(graph: MapGraph, threshold: float) -> int:
         if not graph.edge_alive[k] or not short(k):
             continue
         src, dst = int(graph.edge_from[k]), int(graph.edge_to[k])
-        gone, kept = (src, dst) if src != anchor else (dst, src)
+        gone, kept = src, dst
+        if graph.vertex_time[src] <= graph.vertex_time[dst] - known_age or src == anchor:
+            gone, kept = dst, src
         graph.merge_vertex(gone, kept, tuple(between(pose[kept], pose[gone]).tolist()))
         removed += 1
         queue.extend(k2 for k2 in graph.adjacency[kept].values() if short(k2))

@@ -461,3 +461,21 @@ def test_apply_all_fast_path_equals_event_by_event(mode):
     np.testing.assert_array_equal(a.poses, b.poses)
     np.testing.assert_array_equal(a.edge_rel, b.edge_rel)
     assert [o.time for o in one_by_one.optimizations] == [o.time for o in batched.optimizations]
+
+
+def test_short_edge_keeps_the_old_place_when_it_joins_one_made_much_later():
+    from cogmap_core.map_graph import EdgeKind as Kind
+    from cogmap_core.map_graph import MapGraph
+    from cogmap_core.short_edges import remove_short_edges
+
+    graph = MapGraph()
+    for vid, (t, x) in enumerate([(0.0, 0.0), (1.0, 0.5), (30.0, 0.51), (30.1, 0.9), (30.2, 0.91)]):
+        graph.new_id(vid, t, vid)
+        graph.add_vertex(vid, (x, 0.0, 0.0))
+    graph.add_edge(0, 1, (0.5, 0.0, 0.0), 1.0, Kind.SEQUENTIAL, -1)
+    graph.add_edge(1, 2, (0.01, 0.0, 0.0), 30.0, Kind.LOOP_CLOSURE, 0)  # an old place, a new one
+    graph.add_edge(2, 3, (0.39, 0.0, 0.0), 30.1, Kind.SEQUENTIAL, -1)
+    graph.add_edge(3, 4, (0.01, 0.0, 0.0), 30.2, Kind.SEQUENTIAL, -1)  # made moments apart
+    assert remove_short_edges(graph, 0.03, known_age=10.0) == 2
+    assert graph.live_ids().tolist() == [0, 1, 4]  # 2 merged into old 1; 3 removed (paper)
+    assert graph.resolve(2)[0] == 1 and graph.resolve(3)[0] == 4
