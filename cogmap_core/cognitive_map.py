@@ -495,9 +495,7 @@ class CognitiveMap:
             integrated = self.integration.after_optimisation(graph, self.params)
             self.counters.integrated += integrated
         if self._removes_short:
-            short = remove_short_edges(
-                graph, self.params.short_edge_threshold, self.params.integration_min_age
-            )
+            short = remove_short_edges(graph, self.params.short_edge_threshold)
             self.counters.short_edges += short
         self._follow_merges()
         record = OptimizationRecord(
