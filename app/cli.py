@@ -3,18 +3,42 @@
 Each command lives in its own module ``app/cmd_<name>.py`` exposing ``add_parser(subparsers)``;
 the parser's ``func`` takes the parsed arguments and returns the exit code. Every expected
 failure is a :class:`cogmap_core.errors.CogmapError`, printed here as one line (no traceback)
-with its exit code (2).
+with its exit code (2). Ctrl-C prints "interrupted" (exit 130); SIGTERM unwinds the same way,
+so partial outputs are removed, and prints "terminated" (exit 143).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Callable, Sequence
+from types import FrameType
 
 from cogmap_core import __version__
 from cogmap_core.errors import CogmapError
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every command cleans up its partial outputs."""
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    raise Terminated
+
+
+def _install_sigterm() -> Callable[[], None]:
+    """Turn SIGTERM into :class:`Terminated` while a command runs; returns the undo."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = signal.getsignal(signal.SIGTERM)
+    if previous not in (signal.SIG_DFL, None):  # someone else handles it: leave it alone
+        return lambda: None
+    signal.signal(signal.SIGTERM, _terminate)
+    return lambda: signal.signal(signal.SIGTERM, previous or signal.SIG_DFL)
+
 
 # Modules app/cmd_<name>.py, in the order they appear in --help.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -53,14 +77,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    restore = _install_sigterm()
     try:
         return int(args.func(args) or 0)
     except CogmapError as exc:
         print(f"cogmap {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except Terminated:
+        print(f"cogmap {args.command}: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print(f"cogmap {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        restore()
 
 
 if __name__ == "__main__":

@@ -14,8 +14,6 @@ from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.sources.detect import FORMATS, KINDS, InputKind, LogOptions, resolve_format
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
 
-_MAP_OPTIONS = ("alpha", "beta", "delta", "t_interval", "t_total")
-
 
 def add_topic_arguments(parser: argparse.ArgumentParser) -> None:
     """``--image-topic``, ``--odom-topic``, ``--gt-topic``, ``--no-ground-truth``."""
@@ -36,38 +34,69 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
     )
 
 
-def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``.
+_MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
+    ("alpha", "--alpha", "translation weight >= 0"),
+    ("beta", "--beta", "rotation weight, >= 0"),
+    ("delta", "--delta", "field threshold, > 1"),
+    ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
+    ("t_total", "--t-total", "cluster total-time threshold (s), > 0"),
+)
+_PAPER_FLAGS = tuple(name for name, _, _ in _MAP_ARGUMENTS)
 
-    Unset options keep the default of the input's kind (the paper's for bags,
-    :data:`~cogmap_core.sources.odometry_log.LOG_MAP_PARAMS` for logs).
+
+def add_map_arguments(parser: argparse.ArgumentParser) -> None:
+    """The paper's map parameters as flags, every other one with ``--param NAME=VALUE``.
+
+    Unset ones stay unset (see :func:`map_changes_from_args`): they keep the default of the
+    input's kind (the paper's for bags,
+    :data:`~cogmap_core.sources.odometry_log.LOG_MAP_PARAMS` for logs), and a resumed session
+    keeps its own values for them.
     """
     paper, log = MapParams(), LOG_MAP_PARAMS
-    meaning = {
-        "alpha": "translation weight, >= 0",
-        "beta": "rotation weight, >= 0",
-        "delta": "field threshold, > 1",
-        "t_interval": "cluster interval threshold (s), > 0",
-        "t_total": "cluster total-time threshold (s), > 0",
-    }
-    for name in _MAP_OPTIONS:
+    for name, flag, meaning in _MAP_ARGUMENTS:
         a, b = getattr(paper, name), getattr(log, name)
         default = f"default {a:g}" if a == b else f"default {a:g}; {b:g} for logs"
-        parser.add_argument(
-            "--" + name.replace("_", "-"),
-            type=float,
-            default=None,
-            help=f"{meaning[name]} ({default})",
-        )
+        parser.add_argument(flag, type=float, default=None, help=f"{meaning} ({default})")
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="any other map parameter (repeatable), e.g. --param integration_radius=0.08; "
+        f"names: {', '.join(n for n in paper.to_dict() if n not in _PAPER_FLAGS)} "
+        "(logs have their own defaults for some, see the README)",
+    )
+
+
+def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
+    """The map parameters given on the command line (name -> value), validated."""
+    changes: dict[str, float] = {
+        name: getattr(args, name)
+        for name, _, _ in _MAP_ARGUMENTS
+        if getattr(args, name, None) is not None
+    }
+    for item in getattr(args, "param", []) or []:
+        name, sep, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or not name:
+            raise ParameterError(f"--param {item!r}: expected NAME=VALUE, e.g. huber_scale=0.2")
+        if name in _PAPER_FLAGS:
+            raise ParameterError(f"--param {name}: use --{name.replace('_', '-')} instead")
+        try:
+            changes[name] = float(text)
+        except ValueError:
+            raise ParameterError(f"--param {name}={text!r}: the value is not a number") from None
+    MapParams().with_changes(**changes)  # out-of-range values name the valid range
+    return changes
 
 
 def params_from_args(args: argparse.Namespace, base: MapParams | None = None) -> MapParams:
-    """Map parameters: ``base`` (the input kind's defaults) with the options given.
+    """Map parameters: ``base`` with the options given on the command line.
 
-    Out-of-range values name the valid range.
+    ``base`` is the input kind's defaults (the paper's by default); out-of-range values name the
+    valid range.
     """
-    given = {name: getattr(args, name) for name in _MAP_OPTIONS if getattr(args, name) is not None}
-    return (base or MapParams()).with_changes(**given)
+    return (base or MapParams()).with_changes(**map_changes_from_args(args))
 
 
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:

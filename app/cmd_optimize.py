@@ -4,11 +4,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from cogmap_core.errors import InputFileError, OutputError
+from cogmap_core.fileio import check_writable, output_error
 from cogmap_core.g2o import read_g2o, write_g2o
 from cogmap_core.optimizer import OptimizationResult, OptimizerOptions, optimize_pose_graph
+
+
+def _finite_or_none(value: float) -> float | None:
+    """JSON has no infinity: an overflowing cost is written as null."""
+    return value if math.isfinite(value) else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -28,21 +36,44 @@ class OptimizeReport:
             {
                 "vertices": self.vertices,
                 "edges": self.edges,
-                "initial_cost": self.initial_cost,
-                "final_cost": self.final_cost,
+                "initial_cost": _finite_or_none(self.initial_cost),
+                "final_cost": _finite_or_none(self.final_cost),
                 "iterations": self.iterations,
                 "wall_s": round(self.wall_s, 6),
             }
         )
 
 
+def check_destination(destination: Path) -> None:
+    """Refuse an output path whose folder is missing or unwritable, or that is a folder."""
+    folder = destination.parent if str(destination.parent) else Path(".")
+    if not folder.is_dir():
+        raise InputFileError(f"{destination}: directory {folder} does not exist; create it first")
+    if destination.is_dir():
+        raise OutputError(f"{destination} is a folder; give the path of the .g2o file to write")
+    check_writable(folder)
+
+
 def optimize_file(
     source: Path, destination: Path, options: OptimizerOptions
 ) -> tuple[OptimizeReport, OptimizationResult]:
-    """Read ``source``, optimise, write ``destination`` (only on success); return the report."""
+    """Read ``source``, optimise, write ``destination`` (only on success); return the report.
+
+    ``destination``'s folder is checked writable before the optimisation starts; the file is
+    written atomically, so a failure leaves an existing ``destination`` as it was.
+
+    Raises:
+        InputFileError: ``source`` is missing or malformed, or the folder does not exist.
+        OutputError: ``destination`` cannot be written (read-only folder, full disk...).
+
+    """
     graph = read_g2o(source)
+    check_destination(destination)
     result = optimize_pose_graph(graph, options)
-    write_g2o(graph.with_poses(result.poses), destination)
+    try:
+        write_g2o(graph.with_poses(result.poses), destination)
+    except OSError as exc:
+        raise output_error(destination, exc) from None
     report = OptimizeReport(
         vertices=graph.num_vertices,
         edges=graph.num_edges,

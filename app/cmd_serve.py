@@ -19,11 +19,13 @@ from app.cli_common import (
     frontend_from_args,
     input_kind,
     log_options_from_args,
+    map_changes_from_args,
     params_from_args,
     topics_from_args,
 )
 from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.session_file import describe, resume_session
 from cogmap_core.sources.detect import KINDS
 
 DEFAULT_PORT = 8080
@@ -63,7 +65,7 @@ def display_url(host: str, port: int) -> str:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    params_from_args(args)  # validate before starting anything
+    map_changes_from_args(args)  # validate before starting anything
     topics = topics_from_args(args)
     if args.bag is None:
         kind = KINDS["bag"]  # the built-in dataset
@@ -81,6 +83,24 @@ def _serve(args: argparse.Namespace) -> int:
         log = log_options_from_args(args)  # validates the log's --frontend settings
     if not 0 < args.port < 65536:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
+    resume = None
+    if args.resume is not None:
+        if not kind.has_camera:
+            raise ParameterError(
+                f"--resume: sessions are for bags; {args.bag} is a log of odometry and place "
+                f"recognition ({kind.name}): serve it without --resume"
+            )
+        if args.bag is None:
+            raise ParameterError(
+                "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
+            )
+        bag_path = Path(args.bag)
+        if not bag_path.exists():
+            raise InputFileError(f"{bag_path}: no such bag; give an existing .bag file")
+        resume = resume_session(
+            args.resume, frontend_from_args(args, bag_path), 4, map_changes_from_args(args)
+        )
+        print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     import viser
 
     from app.server.app import CogmapApp
@@ -104,6 +124,7 @@ def _serve(args: argparse.Namespace) -> int:
         fmt=kind.name,
         log=log,
         defaults=kind.map_params,
+        resume=resume,
     )
     stop = threading.Event()
 
@@ -167,6 +188,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="playback speed: data seconds per second, or 'max' (default 1)",
     )
     parser.add_argument("--paused", action="store_true", help="start paused")
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="FILE",
+        help="show a session saved by cogmap run --save-session and keep growing it with BAG "
+        "(the robot starts BAG where the session ended)",
+    )
     parser.add_argument(
         "--static",
         default=None,

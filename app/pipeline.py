@@ -11,36 +11,71 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
-import shutil
 import time as wallclock
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
 
 from app.plots import map_figure, save_png, size_figure
+from app.report import ReportFolder
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagTopics
+from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError, InputFileError
+from cogmap_core.errors import CogmapError, InputFileError, ParameterError
 from cogmap_core.evaluation import LAYOUT_RADIUS, align_rigid_2d
+from cogmap_core.fileio import check_writable
+from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
+from cogmap_core.session_file import SessionMeta, resume_session, save_session
+from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
 from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
 from cogmap_core.sources.odometry_log import LogReader
 
 MAP_ORDER: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+#: Every file a report folder can hold (``--force`` replaces only these, see app/report.py).
+REPORT_FILES: tuple[str, ...] = (
+    "config.json",
+    "summary.json",
+    "sizes.csv",
+    *(f"{m.value}.g2o" for m in MAP_ORDER),
+    "trajectory_tum.txt",
+    "groundtruth_tum.txt",
+    "size.png",
+    "map.png",
+)
 ProgressCallback = Callable[[int, int, float], None]
 
 
 @dataclass(frozen=True, slots=True)
 class RunOptions:
-    """Everything that defines a headless run besides the input."""
+    """Everything that defines a headless run besides the input (a bag or a log).
+
+    Attributes:
+        params: map parameters of a new session (the caller starts them from the input kind's
+            defaults: :attr:`~cogmap_core.sources.detect.InputKind.map_params`).
+        frontend: front-end settings (None: iRat defaults + the bag's profile; unused for logs).
+        topics: the bag's topics (None: the iRat bag's).
+        image_scale: JPEG decode reduction.
+        force: overwrite a non-empty report folder and an existing ``save_session`` file.
+        format: ``bag``, ``tuc`` or ``csv`` (None: detected from the content).
+        log: how to read a log (ignored for bags).
+        on_clock_jump: a bag's clock jumping back: ``drop`` or ``stop`` (bags only).
+        until_error: a bag corrupt part-way: map what comes before the damage (bags only).
+        resume: continue the session saved in this file (its front end, maps and data time);
+            the bag's frames follow the session's as if the bags were one (bags only).
+        param_changes: with ``resume``, map parameters that replace the session's (its maps
+            are then rebuilt from its events).
+        save_session: write the session to this file at the end of the data (before the final
+            optimisation, so that a resumed run continues exactly where this one stopped; bags
+            only).
+
+    """
 
     params: MapParams = field(default_factory=MapParams)
     frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
@@ -49,6 +84,11 @@ class RunOptions:
     force: bool = False
     format: str | None = None  # bag, tuc, csv; None: detected from the content
     log: LogOptions = field(default_factory=LogOptions)  # how to read a log
+    on_clock_jump: str = "drop"  # or "stop": see cogmap_core.datasets.rosbag_reader
+    until_error: bool = False  # a bag corrupt part-way: map what comes before the damage
+    resume: Path | None = None
+    param_changes: Mapping[str, float] = field(default_factory=dict)
+    save_session: Path | None = None
 
 
 @dataclass
@@ -58,6 +98,8 @@ class RunResult:
     summary: dict[str, Any]
     out_dir: Path
     files: list[Path]
+    warnings: list[str] = field(default_factory=list)  # the reader's, one line each
+    session_notes: list[str] = field(default_factory=list)
 
     def table(self) -> str:
         """A compact one-line-per-map summary table."""
@@ -94,23 +136,6 @@ class RunResult:
             f"(precision {precision}, {judged})"
         )
         return "\n".join(lines)
-
-
-def prepare_out_dir(out_dir: Path, force: bool) -> None:
-    """Create ``out_dir``; refuse an existing non-empty one unless ``force``."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputFileError(f"{out_dir} exists and is not a directory; choose another --out")
-    if out_dir.is_dir() and any(out_dir.iterdir()):
-        if not force:
-            raise InputFileError(
-                f"{out_dir} is not empty; choose another --out or pass --force to overwrite it"
-            )
-        for child in out_dir.iterdir():
-            if child.is_dir() and not child.is_symlink():
-                shutil.rmtree(child)
-            else:
-                child.unlink()
-    out_dir.mkdir(parents=True, exist_ok=True)
 
 
 def session_summary(
@@ -175,6 +200,7 @@ def session_summary(
     else:
         assert score.position_error is not None and score.heading_error is not None
         heading = judging.loop_heading
+        scores = session.log.link_scores
         loops = {
             "total": score.total,
             "true": score.true,
@@ -182,7 +208,9 @@ def session_summary(
             "precision": score.precision,
             "tolerance_m": judging.loop_distance,
             "tolerance_deg": None if heading is None else round(math.degrees(heading), 6),
-            "false_links": [_false_link(session, links, score, k) for k in score.false_indices],
+            "false_links": [
+                _false_link(session, links, scores, score, k) for k in score.false_indices
+            ],
         }
     dead_reckoning = session.log.dead_reckoning_ate()
     p = session.params
@@ -209,7 +237,11 @@ def session_summary(
 
 
 def _false_link(
-    session: SlamSession, links: list[tuple[float, int, float]], score: Any, k: int
+    session: SlamSession,
+    links: list[tuple[float, int, float]],
+    scores: list[float | None],
+    score: Any,
+    k: int,
 ) -> dict[str, Any]:
     entry: dict[str, Any] = {
         "time": round(links[k][0], 6),
@@ -218,7 +250,7 @@ def _false_link(
     }
     if session.evaluation.loop_heading is not None:
         entry["heading_error_deg"] = round(math.degrees(float(score.heading_error[k])), 2)
-    link_score = session.log.link_score(k)
+    link_score = scores[k]
     if link_score is not None:
         entry["score"] = round(link_score, 6)
     return entry
@@ -260,7 +292,11 @@ def write_sizes_csv(maps: Mapping[MapMode, CognitiveMap], handle: TextIO) -> Non
 
 
 class HeadlessPipeline:
-    """Process a whole input (bag or log) once and write the report folder."""
+    """Process a whole input (bag or log) once and write the report folder.
+
+    The report is staged and moved into place only when complete (:class:`app.report.ReportFolder`):
+    an error, a full disk or Ctrl-C at any point leaves ``out_dir`` as it was.
+    """
 
     def __init__(
         self,
@@ -268,12 +304,21 @@ class HeadlessPipeline:
         out_dir: Path,
         options: RunOptions | None = None,
         progress: ProgressCallback | None = None,
+        announce: Callable[[str], None] | None = None,
     ) -> None:
-        """Set up a run of ``bag`` (a bag or a log) into ``out_dir``."""
+        """Set up a run of ``bag`` (a bag or a log) into ``out_dir``.
+
+        ``announce`` is told when writing starts.
+
+        Raises:
+            ParameterError: a session (``resume``, ``save_session``) asked of a log.
+
+        """
         self.bag = Path(bag)
         self.out_dir = Path(out_dir)
         self.options = options or RunOptions()
         self.progress = progress
+        self.announce = announce
         self.format = resolve_format(self.bag, self.options.format)
         self.kind = KINDS[self.format]
         self.frontend = (
@@ -281,48 +326,148 @@ class HeadlessPipeline:
             if self.kind.has_camera
             else None
         )
-        self.session = SlamSession(
-            self.options.params, self.frontend, evaluation=self.kind.evaluation
-        )
         self.files: list[Path] = []
+        self.session_notes: list[str] = []
+        options = self.options
+        if not self.kind.has_camera and (
+            options.resume is not None or options.save_session is not None
+        ):
+            flag = "--resume" if options.resume is not None else "--save-session"
+            raise ParameterError(
+                f"{flag}: sessions are for bags; {self.bag} is a log of odometry and place "
+                f"recognition ({self.format}): run it whole, without {flag}"
+            )
+        if options.save_session is not None:
+            check_session_target(options.save_session, options.force)
+        self.meta: SessionMeta | None = None
+        if options.resume is not None:
+            self.session = self._resume(options.resume)
+        else:
+            self.session = SlamSession(
+                options.params, self.frontend, evaluation=self.kind.evaluation
+            )
+
+    def _resume(self, path: Path) -> SlamSession:
+        """Load the session to continue (refused before anything is written)."""
+        started = wallclock.perf_counter()
+        session, meta = resume_session(
+            path, self.frontend, self.options.image_scale, self.options.param_changes
+        )
+        self.meta = meta
+        self.session_notes.append(
+            f"resumed {path} in {wallclock.perf_counter() - started:.2f} s: "
+            f"{session_description(meta, session)}"
+        )
+        return session
 
     def run(self) -> RunResult:
-        """Open the input, process every frame, finish the maps, evaluate, write the report."""
-        reader = self._open_source()
-        prepare_out_dir(self.out_dir, self.options.force)
-        started = wallclock.perf_counter()
-        first, last = self._process_frames(reader)
-        self.session.finish()
-        wall = wallclock.perf_counter() - started
-        summary = self._summary(reader, first, last, wall)
-        self._write_config()
-        self._write_summary(summary)
-        self._write_sizes()
-        self._write_maps()
-        self._write_trajectories()
-        self._write_figures(last, summary)
-        return RunResult(summary, self.out_dir, list(self.files))
+        """Open the input, check the output, process every frame, evaluate, write the report."""
+        with (
+            self._open_source() as reader,
+            ReportFolder(self.out_dir, REPORT_FILES, self.options.force) as report,
+        ):
+            offset = 0.0
+            if isinstance(reader, BagReader):  # a bag: what a session needs to know of it
+                log = self.session.log
+                end = float(log.frame_time[-1]) if log.frames else 0.0
+                if self.meta is None:
+                    self.meta = SessionMeta(
+                        epoch=reader.start_stamp, image_scale=self.options.image_scale
+                    )
+                else:
+                    offset = self.meta.resume_offset(reader.start_stamp, end)
+            started = wallclock.perf_counter()
+            frames_before = self.session.log.frames
+            first, last = self._process_frames(reader, offset)
+            if self.meta is not None:
+                self.meta.bags.append(
+                    {
+                        "bag": str(self.bag),
+                        "offset": offset,
+                        "frames": self.session.log.frames - frames_before,
+                        "first": first,
+                        "last": last,
+                    }
+                )
+            if self.options.save_session is not None:
+                self._save_session(self.options.save_session)
+            self.session.finish()
+            wall = wallclock.perf_counter() - started
+            summary = self._summary(reader, first, last, wall)
+            self._announce(f"writing the report to {report.out_dir}")
+            with report.writing():
+                self._write_config(report)
+                self._write_summary(report, summary)
+                self._write_sizes(report)
+                self._write_maps(report)
+                self._write_trajectories(report)
+                self._write_figures(report, last, summary)
+            self.files = report.commit()
+        return RunResult(
+            summary, report.out_dir, list(self.files), reader.warnings, list(self.session_notes)
+        )
 
     # ------------------------------------------------------------------ steps
+    def _announce(self, message: str) -> None:
+        if self.announce is not None:
+            self.announce(message)
+
     def _open_source(self) -> Source:
         o = self.options
         return open_source(
-            self.bag, self.format, topics=o.topics, image_scale=o.image_scale, log=o.log
+            self.bag,
+            self.format,
+            topics=o.topics,
+            image_scale=o.image_scale,
+            log=o.log,
+            on_clock_jump=o.on_clock_jump,
+            on_corrupt="stop" if o.until_error else "error",
         )
 
-    def _process_frames(self, reader: Source) -> tuple[float, float]:
+    def _check_image_size(self, image: np.ndarray) -> None:
+        """Refuse camera images too small for the view template (they would be magnified)."""
+        assert self.frontend is not None
+        min_w, min_h = self.frontend.minimum_image_size()
+        height, width = image.shape[:2]
+        if width < min_w or height < min_h:
+            scale = self.options.image_scale
+            need_w, need_h = self.frontend.minimum_image_size(scale)
+            cfg = self.frontend
+            raise InputFileError(
+                f"{self.bag}: camera images of about {width * scale}x{height * scale} px are too "
+                f"small for the {cfg.template_x_size}x{cfg.template_y_size} view template; "
+                f"use a camera topic with images of at least {need_w}x{need_h} px"
+            )
+
+    def _process_frames(self, reader: Source, offset: float = 0.0) -> tuple[float, float]:
+        """Every frame (or log step) through the session, placed at ``offset`` + its time."""
         first = last = math.nan
         total = reader.info.frame_count
         for frame in reader.frames():
+            if offset:
+                frame = replace(frame, time=frame.time + offset)
             if math.isnan(first):
+                if isinstance(frame, Frame):
+                    self._check_image_size(frame.image)
                 first = frame.time
             last = frame.time
             self.session.process(frame)
             if self.progress is not None:
                 self.progress(frame.index + 1, total, frame.time)
         if math.isnan(first):
-            raise InputFileError(f"{self.bag}: no decodable camera frame; nothing to map")
+            what = "decodable camera frame" if self.kind.has_camera else "step"
+            raise InputFileError(f"{self.bag}: no {what}; nothing to map")
         return first, last
+
+    def _save_session(self, path: Path) -> None:
+        assert self.meta is not None
+        started = wallclock.perf_counter()
+        save_session(path, self.session, self.meta)
+        self.session_notes.append(
+            f"session saved to {path} ({path.stat().st_size / 1e6:.1f} MB) in "
+            f"{wallclock.perf_counter() - started:.2f} s: "
+            f"{session_description(self.meta, self.session)}"
+        )
 
     def _summary(self, reader: Source, first: float, last: float, wall: float) -> dict[str, Any]:
         return session_summary(
@@ -335,14 +480,11 @@ class HeadlessPipeline:
             source=source_description(reader),
         )
 
-    def _write_json(self, name: str, payload: dict[str, Any]) -> None:
-        path = self.out_dir / name
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(payload, indent=2) + "\n")
-        os.replace(tmp, path)
-        self.files.append(path)
+    @staticmethod
+    def _write_json(report: ReportFolder, name: str, payload: dict[str, Any]) -> None:
+        report.write_text(name, json.dumps(payload, indent=2) + "\n")
 
-    def _write_config(self) -> None:
+    def _write_config(self, report: ReportFolder) -> None:
         config: dict[str, Any] = {"dataset": str(self.bag), "format": self.format}
         config["map"] = self.options.params.to_dict()
         if self.frontend is not None:
@@ -355,47 +497,44 @@ class HeadlessPipeline:
             config["loops"] = None if log.loops is None else str(log.loops)
             config["ground_truth"] = None if log.ground_truth is None else str(log.ground_truth)
             config["use_ground_truth"] = log.use_ground_truth
-        self._write_json("config.json", config)
+        self._write_json(report, "config.json", config)
 
-    def _write_summary(self, summary: dict[str, Any]) -> None:
-        self._write_json("summary.json", summary)
+    def _write_summary(self, report: ReportFolder, summary: dict[str, Any]) -> None:
+        self._write_json(report, "summary.json", summary)
 
-    def _write_sizes(self) -> None:
+    def _write_sizes(self, report: ReportFolder) -> None:
         """sizes.csv: time and the vertices/edges of each map, on the union of change times."""
-        path = self.out_dir / "sizes.csv"
-        with path.open("w", newline="") as handle:
+        with report.open("sizes.csv", newline="") as handle:
             write_sizes_csv(self.session.maps.maps, handle)
-        self.files.append(path)
 
-    def _write_maps(self) -> None:
+    def _write_maps(self, report: ReportFolder) -> None:
         for mode in MAP_ORDER:
-            path = self.out_dir / f"{mode.value}.g2o"
-            write_g2o(self.session.maps[mode].to_pose_graph(), path)
-            self.files.append(path)
+            write_g2o(self.session.maps[mode].to_pose_graph(), report.path(f"{mode.value}.g2o"))
 
-    def _write_trajectories(self) -> None:
+    def _write_trajectories(self, report: ReportFolder) -> None:
         """TUM files for evo: the standard map's vertices, and the ground truth when known."""
         standard = self.session.maps[MapMode.STANDARD].snapshot()
         order = np.argsort(standard.vertex_time, kind="stable")
-        self._write_tum("trajectory_tum.txt", standard.vertex_time[order], standard.poses[order])
+        times = standard.vertex_time[order]
+        self._write_tum(report, "trajectory_tum.txt", times, standard.poses[order])
         truth = self.session.vertex_ground_truth(self.session.maps[MapMode.STANDARD])
         if truth is not None:
-            self._write_tum("groundtruth_tum.txt", standard.vertex_time[order], truth[order])
+            self._write_tum(report, "groundtruth_tum.txt", times, truth[order])
 
-    def _write_tum(self, name: str, times: np.ndarray, poses: np.ndarray) -> None:
-        path = self.out_dir / name
-        with path.open("w") as handle:
+    @staticmethod
+    def _write_tum(report: ReportFolder, name: str, times: np.ndarray, poses: np.ndarray) -> None:
+        with report.open(name) as handle:
             handle.write("# timestamp tx ty tz qx qy qz qw\n")
             for t, (x, y, th) in zip(times.tolist(), poses.tolist(), strict=True):
                 handle.write(
                     f"{t:.6f} {x:.6f} {y:.6f} 0 0 0 {math.sin(th / 2):.9f} {math.cos(th / 2):.9f}\n"
                 )
-        self.files.append(path)
 
-    def _write_figures(self, end_time: float, summary: dict[str, Any]) -> None:
+    def _write_figures(
+        self, report: ReportFolder, end_time: float, summary: dict[str, Any]
+    ) -> None:
         histories = {m.value: self.session.maps[m].size_history() for m in MAP_ORDER}
-        save_png(size_figure(histories, end_time), self.out_dir / "size.png")
-        self.files.append(self.out_dir / "size.png")
+        save_png(size_figure(histories, end_time), report.path("size.png"))
         snaps = {m.value: self.session.maps[m].snapshot() for m in MAP_ORDER}
         aligned: dict[str, np.ndarray] = {}
         truth_path = None
@@ -417,16 +556,36 @@ class HeadlessPipeline:
                     f"ATE {entry['ate_m']:.3f} m, completeness {entry['completeness']:.3f}, "
                     f"correctness {entry['correctness']:.3f}"
                 )
-        save_png(map_figure(truth_path, snaps, aligned, notes), self.out_dir / "map.png")
-        self.files.append(self.out_dir / "map.png")
+        save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
+
+
+def check_session_target(path: Path, force: bool) -> None:
+    """Refuse a session file target that would fail only at the end of a long run."""
+    if path.is_dir():
+        raise InputFileError(f"{path} is a directory; give --save-session a file name")
+    if path.exists() and not force:
+        raise InputFileError(
+            f"{path} already exists; choose another --save-session file or pass --force to "
+            "overwrite it"
+        )
+    if not path.parent.is_dir():
+        raise InputFileError(f"folder {path.parent} of --save-session does not exist; create it")
+    check_writable(path.parent)  # a probe file: mode bits do not stop root
 
 
 def run_headless(
-    bag: Path, out_dir: Path, options: RunOptions, progress: ProgressCallback | None = None
+    bag: Path,
+    out_dir: Path,
+    options: RunOptions,
+    progress: ProgressCallback | None = None,
+    announce: Callable[[str], None] | None = None,
 ) -> RunResult:
-    """Library entry of ``cogmap run``: process ``bag`` (or a log) into the report ``out_dir``."""
+    """Library entry of ``cogmap run``: process ``bag`` (or a log) into the report ``out_dir``.
+
+    ``announce`` receives one-line notes of what is happening (e.g. that writing has started).
+    """
     try:
-        return HeadlessPipeline(bag, out_dir, options, progress).run()
+        return HeadlessPipeline(bag, out_dir, options, progress, announce).run()
     except CogmapError:
         raise
     except MemoryError:

@@ -192,6 +192,8 @@ def map_figure(
 
 
 def save_png(image: NDArray[np.uint8], path: Path) -> None:
-    """Write a PNG (raises OSError on failure)."""
-    if not cv2.imwrite(str(path), image):
-        raise OSError(f"could not write {path}")
+    """Write a PNG (raises OSError on failure, e.g. a full disk, with the system's reason)."""
+    ok, data = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"could not encode {path.name} as PNG")
+    Path(path).write_bytes(data.tobytes())

@@ -38,3 +38,4 @@ class ProgressBar:
         if self._drawn:
             self.stream.write("\n")
             self.stream.flush()
+            self._drawn = False

@@ -8,9 +8,10 @@ are built from the events with the paper's parameters and every figure is printe
 - vertices, edges, loop edges, edges per vertex;
 - layout completeness and correctness at 8 cm against the dense ground-truth path;
 - ATE, beside the dead-reckoning ATE of the same bag;
-- size change over laps 3-6 (start of lap 3 to end of lap 6), on known ground (vertices made on
-  ground the robot first explored in those laps -- detours into corridors it had not driven --
-  set apart, see ``cogmap_core.evaluation.size_change``) and raw;
+- size change over laps 3-6, from the end of lap 3 to the end of lap 6 (the window the long-term
+  benchmark uses from the end of lap 3), on known ground -- vertices made while exploring
+  corridors the robot had not driven before (the generator's random detours) set apart, see
+  ``cogmap_core.evaluation.size_change`` -- and raw; also from the start of lap 3 ("2..6");
 - map build time as a realtime factor (data seconds per wall second, maps only) and, from the
   front end's run, the whole pipeline's;
 - loop-closure precision (position within 0.1 m and heading within 20 degrees).
@@ -124,7 +125,7 @@ def evaluate(data: Dataset, params: MapParams, radius: float, maps_dir: Path | N
     )
     print(
         f"  {'map':18} {'V':>5} {'E':>5} {'loops':>5} {'E/V':>5} {'compl':>6} {'corr':>6} "
-        f"{'ATE m':>7} {'ATE/DR':>6} {'laps3-6':>8} {'raw':>8} {'expl':>4} {'opt':>4} "
+        f"{'ATE m':>7} {'ATE/DR':>6} {'laps3-6':>8} {'raw':>8} {'expl':>4} {'2..6':>8} {'opt':>4} "
         f"{'map s':>6}"
     )
     figures: dict[MapMode, dict[str, float]] = {}
@@ -133,8 +134,9 @@ def evaluate(data: Dataset, params: MapParams, radius: float, maps_dir: Path | N
         fid = log.layout_fidelity(cmap, radius)
         ate = log.map_ate(cmap)
         assert fid is not None and ate is not None
-        growth = log.size_change(cmap, data.lap_times[2], data.lap_times[6], radius)
-        assert growth is not None
+        growth = log.size_change(cmap, data.lap_times[3], data.lap_times[6], radius)
+        from_lap_2 = log.size_change(cmap, data.lap_times[2], data.lap_times[6], radius)
+        assert growth is not None and from_lap_2 is not None
         change = growth.change_without_exploration
         figures[mode] = {
             "V": cmap.num_vertices,
@@ -146,12 +148,14 @@ def evaluate(data: Dataset, params: MapParams, radius: float, maps_dir: Path | N
             "change": change,
             "raw_change": growth.change,
             "explored": growth.exploration_vertices,
+            "from_lap_2": from_lap_2.change_without_exploration,
         }
         print(
             f"  {mode.value:18} {cmap.num_vertices:5d} {cmap.num_edges:5d} "
             f"{cmap.num_loop_edges:5d} {fid.edges_per_vertex:5.2f} {fid.completeness:6.3f} "
             f"{fid.correctness:6.3f} {ate:7.4f} {ate / dr_ate:6.3f} {change:+8.1%} "
             f"{growth.change:+8.1%} {growth.exploration_vertices:4d} "
+            f"{from_lap_2.change_without_exploration:+8.1%} "
             f"{len(cmap.optimizations):4d} {wall[mode]:6.2f}"
         )
     std, si, cm = (figures[m] for m in MODES)
@@ -168,7 +172,8 @@ def evaluate(data: Dataset, params: MapParams, radius: float, maps_dir: Path | N
         ("compact vertices <= 0.15 x standard", cm["V"] <= 0.15 * std["V"]),
         (
             f"compact size change laps 3-6 within +-3 % on known ground "
-            f"(raw {cm['raw_change']:+.1%}, {cm['explored']} vertices on ground first explored)",
+            f"(raw {cm['raw_change']:+.1%}, {cm['explored']} vertices made exploring; "
+            f"from the start of lap 3: {cm['from_lap_2']:+.1%})",
             abs(cm["change"]) <= 0.03,
         ),
         (

@@ -31,3 +31,11 @@ class EventError(CogmapError):
 
 class OptimizationError(CogmapError):
     """Ceres could not solve the problem (for example non-finite values)."""
+
+
+class OutputError(CogmapError):
+    """An output cannot be written: read-only or missing folder, full disk, a folder in the way.
+
+    Raised before any work when the target is found unwritable, or when writing fails; either way
+    the previous output (if any) is left intact.
+    """

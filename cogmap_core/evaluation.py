@@ -326,9 +326,10 @@ class SizeChange:
     Attributes:
         start_vertices: live vertices at the start.
         end_vertices: live vertices at the end.
-        exploration_vertices: vertices alive at the end that were made during the stretch on
-            ground first explored during it (the true path had not passed within the radius
-            before the start).
+        exploration_vertices: vertices alive at the end that were made during the stretch while
+            the robot explored: the true path within ``margin`` metres of travel around the
+            vertex's creation reaches ground it had not passed (within the radius) before the
+            start -- the new corridor itself, and the turns into and out of it.
         change: (end - start) / start.
         change_without_exploration: (end - exploration - start) / start: growth or shrinking
             on ground that was already known -- what a map that "does not grow unless the
@@ -347,12 +348,12 @@ def size_change(
     size_times: FloatArray,
     size_vertices: NDArray[np.int64],
     vertex_time: FloatArray,
-    vertex_truth: FloatArray,
     path_times: FloatArray,
     true_path: FloatArray,
     start: float,
     end: float,
     radius: float = LAYOUT_RADIUS,
+    margin: float = 0.3,
 ) -> SizeChange:
     """Size change of a map between data times ``start`` and ``end`` (see :class:`SizeChange`).
 
@@ -360,12 +361,13 @@ def size_change(
         size_times: the map's size history: times ...
         size_vertices: ... and live vertices after each.
         vertex_time: creation times of the vertices alive at ``end``.
-        vertex_truth: ``(N, 2+)`` their true positions at creation.
         path_times: times of the dense ground-truth path ...
         true_path: ... and its ``(M, 2+)`` poses.
         start: start of the stretch (s).
         end: end of the stretch (s).
         radius: how close the path must have passed before ``start`` for ground to be known.
+        margin: metres of travel around a vertex's creation that decide whether it was made
+            while exploring (about a compact vertex spacing).
 
     """
 
@@ -374,16 +376,26 @@ def size_change(
         return int(size_vertices[k]) if k >= 0 else 0
 
     v0, v1 = size_at(start), size_at(end)
-    made = (np.asarray(vertex_time) > start) & (np.asarray(vertex_time) <= end)
-    known = np.asarray(true_path, dtype=np.float64)[np.asarray(path_times) <= start, :2]
+    times = np.asarray(vertex_time, dtype=np.float64)
+    made = (times > start) & (times <= end)
+    path = np.asarray(true_path, dtype=np.float64)[:, :2]
+    path_t = np.asarray(path_times, dtype=np.float64)
+    before = path_t <= start
     explored = 0
     if made.any():
-        points = np.asarray(vertex_truth, dtype=np.float64)[made, :2]
-        if known.shape[0] == 0:
-            explored = int(points.shape[0])
+        during = ~before
+        new_ground = np.zeros(path.shape[0], dtype=bool)
+        if before.any():
+            gap, _ = cKDTree(path[before]).query(path[during])
+            new_ground[during] = gap > radius
         else:
-            gap, _ = cKDTree(known).query(points)
-            explored = int(np.count_nonzero(gap > radius))
+            new_ground[during] = True
+        travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+        new_count = np.concatenate([[0], np.cumsum(new_ground)])
+        at = np.interp(times[made], path_t, travelled)
+        lo = np.searchsorted(travelled, at - margin, side="left")
+        hi = np.searchsorted(travelled, at + margin, side="right")
+        explored = int(np.count_nonzero(new_count[hi] - new_count[lo] > 0))
     if v0 == 0:
         return SizeChange(v0, v1, explored, float("nan"), float("nan"))
     return SizeChange(v0, v1, explored, (v1 - v0) / v0, (v1 - explored - v0) / v0)

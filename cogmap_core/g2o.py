@@ -3,19 +3,26 @@
 g2o stores the upper triangle of each edge's information matrix as ``I11 I12 I13 I22 I23 I33``;
 TORO stores ``Ixx Ixy Iyy Itt Ixt Iyt``. ``FIX id`` lines mark fixed vertices. Comments start
 with ``#``. Every malformed input raises :class:`G2oFormatError` naming the file and line.
+
+A file with edges but no vertex lines (as SE-Sync and many benchmark sets ship them) gets one
+vertex per id named by the edges, in id order, with poses chained along the edges from the
+first vertex of each connected part (:func:`chained_poses`).
 """
 
 from __future__ import annotations
 
 import math
 import os
-import tempfile
+from collections import deque
 from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from cogmap_core.errors import G2oFormatError, InputFileError
+from cogmap_core.fileio import atomic_writer
+from cogmap_core.geometry import compose_scalar, inverse_scalar
 from cogmap_core.posegraph import PoseGraph
 
 _VERTEX_TAGS = {"VERTEX_SE2": "g2o", "VERTEX2": "toro"}
@@ -43,13 +50,58 @@ def _numbers(path: Path, lineno: int, tag: str, tokens: list[str], count: int) -
     return values
 
 
+_ID_MIN, _ID_MAX = -(2**63), 2**63 - 1
+
+
 def _vertex_id(path: Path, lineno: int, tag: str, token: str) -> int:
     try:
-        return int(token)
+        value = int(token)
     except ValueError:
         raise G2oFormatError(
             f"{path}:{lineno}: {tag} vertex id {token!r} is not an integer; fix the line"
         ) from None
+    if not _ID_MIN <= value <= _ID_MAX:
+        raise G2oFormatError(
+            f"{path}:{lineno}: {tag} vertex id {token} is out of range (-2^63 to 2^63-1); "
+            "renumber the vertices"
+        )
+    return value
+
+
+def chained_poses(
+    edge_from: NDArray[np.int64],
+    edge_to: NDArray[np.int64],
+    measurements: NDArray[np.float64],
+    n: int,
+) -> NDArray[np.float64]:
+    """Poses of ``n`` vertices chained along the edges (odometry), breadth first.
+
+    The first vertex of each connected part sits at the origin; every other vertex is placed
+    from the first edge (in file order) that reaches it, composing its measurement (or its
+    inverse when the edge is walked backwards).
+    """
+    adjacency: list[list[tuple[int, int, bool]]] = [[] for _ in range(n)]
+    for k, (i, j) in enumerate(zip(edge_from.tolist(), edge_to.tolist(), strict=True)):
+        adjacency[i].append((j, k, True))
+        adjacency[j].append((i, k, False))
+    poses = [(0.0, 0.0, 0.0)] * n
+    placed = [False] * n
+    meas = measurements.tolist()
+    for root in range(n):
+        if placed[root]:
+            continue
+        placed[root] = True
+        queue = deque([root])
+        while queue:
+            u = queue.popleft()
+            for v, k, forward in adjacency[u]:
+                if placed[v]:
+                    continue
+                step = meas[k] if forward else inverse_scalar(meas[k])
+                poses[v] = compose_scalar(poses[u], step)
+                placed[v] = True
+                queue.append(v)
+    return np.array(poses, dtype=np.float64).reshape(n, 3)
 
 
 def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
@@ -58,15 +110,19 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
     Vertices keep their file order; edge endpoints are stored as vertex indices. Vertices named
     in ``FIX`` lines are marked fixed.
 
+    A file without vertex lines takes its vertices from its edges (see the module docstring).
+    A UTF-8 byte-order mark at the start is ignored.
+
     Raises:
         InputFileError: the file is missing or unreadable.
-        G2oFormatError: a line is malformed, a tag unknown, a value NaN, a vertex missing or
-            duplicated, an information matrix not positive definite, or the file has no vertex.
+        G2oFormatError: a line is malformed, a tag unknown, a value NaN, a vertex id out of the
+            64-bit range, missing or duplicated, an information matrix not positive definite,
+            or the file has neither vertices nor edges.
 
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise InputFileError(f"{path}: no such file; give the path of a .g2o pose graph") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -119,8 +175,15 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
                 f"{path}:{lineno}: unknown tag {tag!r}; this reader takes 2D graphs "
                 "(VERTEX_SE2/EDGE_SE2, VERTEX2/EDGE2, FIX)"
             )
+    from_edges = not ids and bool(edges)
+    if from_edges:  # edges only: one vertex per id they name, in id order
+        ids = sorted({vid for _, vi, vj, _, _, _ in edges for vid in (vi, vj)})
+        index_of = {vid: k for k, vid in enumerate(ids)}
+        poses = [[0.0, 0.0, 0.0]] * len(ids)
     if not ids:
-        raise G2oFormatError(f"{path}: no VERTEX_SE2 or VERTEX2 line; is this a 2D g2o pose graph?")
+        raise G2oFormatError(
+            f"{path}: no VERTEX_SE2/VERTEX2 or EDGE_SE2/EDGE2 line; is this a 2D g2o pose graph?"
+        )
 
     n_edges = len(edges)
     edge_from = np.empty(n_edges, dtype=np.int64)
@@ -151,6 +214,8 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
                 f"{path}:{lineno}: information matrix is not positive definite; "
                 "fix its six values (upper triangle I11 I12 I13 I22 I23 I33)"
             )
+    if from_edges:
+        poses = chained_poses(edge_from, edge_to, measurements, len(ids)).tolist()
     fixed = np.zeros(len(ids), dtype=bool)
     for lineno, vid in fixed_ids:
         if vid not in index_of:
@@ -188,16 +253,19 @@ def format_g2o(graph: PoseGraph) -> Iterable[str]:
 
 
 def write_g2o(graph: PoseGraph, path: str | os.PathLike[str]) -> None:
-    """Write ``graph`` as g2o text, atomically (a reader never sees a half-written file)."""
+    """Write ``graph`` as g2o text, atomically (a reader never sees a half-written file).
+
+    The file gets the user's normal permissions (0666 minus the umask).
+
+    Raises:
+        InputFileError: the folder does not exist.
+        OSError: the file cannot be written (full disk, read-only folder...); ``path`` is then
+            left as it was.
+
+    """
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise InputFileError(f"{path}: directory {directory} does not exist; create it first")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.writelines(format_g2o(graph))
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
+    with atomic_writer(path) as handle:
+        handle.writelines(format_g2o(graph))

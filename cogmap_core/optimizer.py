@@ -30,6 +30,7 @@ solve. Here the Python code runs *once per evaluation of the whole problem*, vec
 
 from __future__ import annotations
 
+import signal
 import time
 from dataclasses import dataclass
 from typing import Literal
@@ -50,6 +51,25 @@ IntArray = NDArray[np.int64]
 
 _IDENTITY = np.eye(3)
 AUTO_LAGO_COST_PER_EDGE = 1.0
+
+
+def _quiet_ceres() -> None:
+    """Keep Ceres' glog output off stderr, and SIGTERM a plain termination.
+
+    Ceres reports problems through glog (``E... program_evaluator.h] Accumulated cost = inf``);
+    the same text reaches the caller as ``summary.message`` and becomes an OptimizationError, so
+    only fatal messages are kept. Importing pyceres installs glog's failure handler, which
+    answers SIGTERM with a stack trace that reads as a crash: SIGTERM gets back the handler
+    Python had (by default: terminate quietly).
+    """
+    pyceres.logging.minloglevel = 3  # FATAL only
+    try:
+        signal.signal(signal.SIGTERM, signal.getsignal(signal.SIGTERM) or signal.SIG_DFL)
+    except ValueError:  # imported outside the main thread: cannot touch signals
+        pass
+
+
+_quiet_ceres()
 """With ``initialization="auto"``: LAGO when the initial cost exceeds this many units per edge."""
 
 
@@ -478,7 +498,13 @@ def optimize_pose_graph(
         options.initialization == "auto" and initial_cost > AUTO_LAGO_COST_PER_EDGE * e
     )
     if use_lago:
-        work.poses = lago_initialization(work)
+        with np.errstate(over="ignore", invalid="ignore"):
+            work.poses = lago_initialization(work)
+        if not np.isfinite(work.poses).all():
+            raise OptimizationError(
+                "the LAGO initialisation overflowed: the graph's values are too large; rescale "
+                "the graph, or start from its own poses (initialization 'none')"
+            )
     poses = np.ascontiguousarray(work.poses, dtype=np.float64)
 
     bounds = _chunk_bounds(n, fixed, options.chunk_size)
@@ -517,7 +543,7 @@ def optimize_pose_graph(
     pyceres.solve(solver_options, problem, summary)
     termination = str(summary.termination_type).rsplit(".", 1)[-1]
     if termination == "FAILURE" or not np.isfinite(poses).all():
-        raise OptimizationError(f"Ceres failed: {summary.message}")
+        raise OptimizationError(f"Ceres failed: {' '.join(str(summary.message).split())}")
     poses[:, 2] = wrap_angle(poses[:, 2])
     # Ceres' cost is the robust cost itself (the snapshot residual is zero)
     final_cost = float(summary.final_cost)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -155,3 +156,13 @@ def test_make_maze_bad_arguments(
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "x.bag").exists()
+
+
+def test_partial_files_of_killed_generations_are_removed_on_next_use(tiny_default: Path) -> None:
+    path = default_dataset_path()
+    dead = tiny_default / f".{path.name}.partial-999999999"  # no such process
+    dead.write_bytes(b"half a bag")
+    live = tiny_default / f".{path.name}.partial-{os.getppid()}"  # a running process's
+    live.write_bytes(b"being written")
+    assert default_dataset_path() == path  # the bag exists: no generation, but clean-up
+    assert not dead.exists() and live.exists()

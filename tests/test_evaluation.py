@@ -108,20 +108,25 @@ def test_layout_fidelity_aligns_the_map_first():
 
 
 def test_size_change_sets_exploration_apart():
-    # sizes: 10 vertices at t=5, 12 at t=15 (two new ones: one on known ground, one beyond)
-    size_times = np.array([0.0, 5.0, 12.0, 14.0])
-    size_vertices = np.array([1, 10, 11, 12])
-    path_times = np.linspace(0.0, 20.0, 201)
-    path = np.c_[np.where(path_times <= 10.0, path_times * 0.1, 1.0 + (path_times - 10.0) * 0.1)]
-    path = np.c_[path, np.zeros_like(path)]
-    vertex_time = np.array([0.0, 12.0, 14.0])  # alive at the end: an old one and the two new
-    vertex_truth = np.array([[0.0, 0.0], [0.5, 0.02], [1.8, 0.0]])  # 0.5 m: known by t=10
-    change = size_change(
-        size_times, size_vertices, vertex_time, vertex_truth, path_times, path, 10.0, 15.0
-    )
-    assert (change.start_vertices, change.end_vertices, change.exploration_vertices) == (10, 12, 1)
-    assert change.change == pytest.approx(0.2)
+    # the robot maps x = 0 -> 1 (t 0-10), drives back to x = 0 (t 10-20), then explores
+    # y = 0 -> 1 (t 20-30); the map has 10 vertices at t = 10 and 13 at t = 30
+    path_times = np.linspace(0.0, 30.0, 301)
+    x = np.interp(path_times, [0, 10, 20, 30], [0.0, 1.0, 0.0, 0.0])
+    y = np.interp(path_times, [0, 10, 20, 30], [0.0, 0.0, 0.0, 1.0])
+    path = np.c_[x, y]
+    size_times = np.array([0.0, 5.0, 14.0, 19.5, 25.0])
+    size_vertices = np.array([1, 10, 11, 12, 13])
+    # alive at the end: one old vertex and three new: on known ground (x = 0.6), 5 cm before
+    # the new corridor (the turn into it) and in it
+    vertex_time = np.array([0.0, 14.0, 19.5, 25.0])
+    change = size_change(size_times, size_vertices, vertex_time, path_times, path, 10.0, 30.0)
+    assert (change.start_vertices, change.end_vertices, change.exploration_vertices) == (10, 13, 2)
+    assert change.change == pytest.approx(0.3)
     assert change.change_without_exploration == pytest.approx(0.1)
+    strict = size_change(
+        size_times, size_vertices, vertex_time, path_times, path, 10.0, 30.0, margin=0.0
+    )
+    assert strict.exploration_vertices == 1  # without the margin the turn counts as known
 
 
 def test_radius_test_agrees_with_brute_force():

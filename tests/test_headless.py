@@ -189,6 +189,14 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, maze_bag: Path, capsys
     assert "alpha=-2.0 is out of range" in capsys.readouterr().err
     assert main(["run", str(maze_bag), "--out", str(out), "--t-total", "0"]) == 2
     assert "t_total=0.0 is out of range" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gamma=1"]) == 2
+    assert "unknown map parameter(s) ['gamma']" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "huber_scale"]) == 2
+    assert "expected NAME=VALUE" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gate_heading=x"]) == 2
+    assert "gate_heading='x': the value is not a number" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gate_position=-1"]) == 2
+    assert "gate_position=-1.0 is out of range" in capsys.readouterr().err
     truncated = tmp_path / "truncated.bag"
     truncated.write_bytes(maze_bag.read_bytes()[:200_000])
     assert main(["run", str(truncated), "--out", str(out)]) == 2

@@ -113,6 +113,47 @@ def test_settings_from_the_command_line(square_log: Path, tmp_path: Path, capsys
     capsys.readouterr()
 
 
+def test_param_options_override_the_log_defaults(square_log: Path, tmp_path: Path) -> None:
+    """--param NAME=VALUE and the paper's flags change the log's defaults, nothing else."""
+    out = tmp_path / "run"
+    args = ["run", str(square_log), "--out", str(out), "--param", "integration_radius=0.3"]
+    assert main([*args, "--beta", "12"]) == 0
+    config = json.loads((out / "config.json").read_text())
+    expected = LOG_MAP_PARAMS.with_changes(integration_radius=0.3, beta=12.0)
+    assert config["map"] == expected.to_dict()
+    assert config["map"]["alpha"] == LOG_MAP_PARAMS.alpha  # still the log's default
+
+
+def test_a_log_report_is_staged_like_a_bag_report(square_log: Path, tmp_path: Path) -> None:
+    """The report marker is written; --force replaces only the report's own files."""
+    out = tmp_path / "run"
+    assert main(["run", str(square_log), "--out", str(out)]) == 0
+    assert (out / ".cogmap-report").is_file()
+    mine = out / "notes.txt"
+    mine.write_text("keep me")
+    assert main(["run", str(square_log), "--out", str(out)]) == 2  # not empty: needs --force
+    assert main(["run", str(square_log), "--out", str(out), "--force"]) == 0
+    assert mine.read_text() == "keep me" and (out / "summary.json").is_file()
+
+
+def test_sessions_are_refused_for_logs(square_log: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "run"
+    session = tmp_path / "s.npz"
+    for flag in ("--save-session", "--resume"):
+        if flag == "--resume":
+            assert not session.exists()  # --save-session wrote nothing
+            session.write_bytes(b"anything")
+        code = main(["run", str(square_log), "--out", str(out), flag, str(session)])
+        lines = [ln for ln in capsys.readouterr().err.splitlines() if "cogmap run [" not in ln]
+        assert code == 2 and len(lines) == 1, lines
+        assert f"{flag}: sessions are for bags" in lines[0]
+        assert not out.exists()
+    assert session.read_bytes() == b"anything"
+    assert main(["serve", str(square_log), "--resume", str(session), "--port", "1"]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln]
+    assert len(lines) == 1 and "--resume: sessions are for bags" in lines[0], lines
+
+
 def write(path: Path, lines: list[str]) -> Path:
     path.write_text("".join(line + "\n" for line in lines))
     return path
@@ -179,11 +220,13 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, square_log: Path, caps
     for case, args, message in bad_inputs(tmp_path, square_log):
         out = tmp_path / f"out-{case.replace(' ', '-')}"
         code = main(["run", *args[:1], "--out", str(out), *args[1:]])
-        err = capsys.readouterr().err
+        captured = capsys.readouterr()
+        err = captured.err
         lines = [line for line in err.splitlines() if "cogmap run [" not in line]
         if case.startswith("partial"):
             assert code == 0, case
-            assert any(message in line for line in lines), (case, err)
+            # printed after the table like a bag's reader warnings
+            assert any(line.startswith(message) for line in captured.out.splitlines()), case
             summary = json.loads((out / "summary.json").read_text())
             assert summary["dead_reckoning_ate_m"] is None
             continue

@@ -80,6 +80,9 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
         assert counter(app, "compact-clusters") == str(len(compact.clusters))
         assert counter(app, "compact-optimizations") == str(len(compact.optimizations))
         assert counter(app, "compact-ate") == f"{reference.ate(compact):.3f}"
+        fidelity = reference.layout_fidelity(compact)
+        assert counter(app, "compact-completeness") == f"{fidelity.completeness:.3f}"
+        assert counter(app, "compact-correctness") == f"{fidelity.correctness:.3f}"
         links = sum(1 for e in reference.log.events if type(e).__name__ == "LinkToVertex")
         assert counter(app, "loops-detected") == str(links)
         # the scene shows exactly the compact map's vertices and the whole ground truth
@@ -507,3 +510,182 @@ def test_the_built_in_dataset_is_prepared_with_progress_on_the_page(
     finally:
         app.stop()
         server.stop()
+
+
+# ------------------------------------------------------------------- GUI values from clients
+def _gui_updates(data: bytes) -> list[tuple[str, dict]]:
+    """The ``GuiUpdateMessage``s in one websocket frame of viser's wire format."""
+    import zstandard
+
+    size = int.from_bytes(data[8:16], "little")
+    inner = zstandard.ZstdDecompressor().decompressobj().decompress(data[16 : 16 + size])
+    payload = msgspec.msgpack.decode(inner)
+    return [
+        (m["uuid"], m["updates"])
+        for m in payload["messages"]
+        if isinstance(m, dict) and m.get("type") == "GuiUpdateMessage"
+    ]
+
+
+def _drain(ws: ClientConnection, seconds: float = 0.5) -> list[tuple[str, dict]]:
+    seen: list[tuple[str, dict]] = []
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            seen += _gui_updates(ws.recv(timeout=0.05))  # type: ignore[arg-type]
+        except TimeoutError:
+            pass
+    return seen
+
+
+def _send(ws: ClientConnection, handle: object, updates: dict) -> None:
+    uuid = handle._impl.uuid  # type: ignore[attr-defined]
+    ws.send(msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": uuid, "updates": updates}))
+
+
+def _wait_clients(app: CogmapApp, n: int) -> None:
+    deadline = time.monotonic() + 10
+    while len(app.server.get_clients()) < n and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert len(app.server.get_clients()) == n
+
+
+def _buffered(app: CogmapApp, handle: object) -> object:
+    """The value a client joining now is sent for ``handle``."""
+    buffer = app.server._websock_server._broadcast_buffer
+    with buffer.buffer_lock:
+        messages = list(buffer.message_from_id.values())
+    uuid = handle._impl.uuid  # type: ignore[attr-defined]
+    values = [
+        m.updates["value"]
+        for m in messages
+        if type(m).__name__ == "GuiUpdateMessage" and m.uuid == uuid and "value" in m.updates
+    ]
+    return values[-1] if values else None
+
+
+def test_bad_gui_values_are_refused_before_any_client_sees_them(
+    short_bag: Path, tmp_path: Path
+) -> None:
+    with running_app(short_bag, autoplay=False) as app:
+        wait(app)
+        port = app.server.get_port()
+        with _client(port) as sender, _client(port) as viewer:
+            _say_hello(sender)
+            _say_hello(viewer)
+            _wait_clients(app, 2)
+            _drain(viewer)
+            refused = app.gate.refused
+            bad = [
+                (app.mode_dropdown, {"value": "bogus"}),
+                (app.compare_dropdown, {"value": "nope"}),
+                (app.speed_dropdown, {"value": "bogus"}),
+                (app.truth_checkbox, {"value": "bogus"}),  # viser would make it True
+                (app.seek_slider, {"value": float("inf")}),
+                (app.param_sliders["alpha"], {"value": "many"}),
+                (app.replay_path, {"value": 12}),
+                (app.play_button, {"value": False}),
+                (app.play_button, {"disabled": True}),  # not a client's to change
+                (app.param_sliders["delta"], {"max": 1e9}),
+            ]
+            for handle, updates in bad:
+                _send(sender, handle, updates)
+            deadline = time.monotonic() + 10
+            while app.gate.refused < refused + len(bad) and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert app.gate.refused == refused + len(bad)
+            attacked = {h._impl.uuid for h, _ in bad}  # type: ignore[attr-defined]
+            seen = [(uuid, u) for uuid, u in _drain(viewer) if uuid in attacked]
+            # the viewer only ever sees the values in force, sent back after each refusal
+            values = {repr(u.get("value")) for _, u in seen}
+            assert values and not values & {"'bogus'", "'nope'", "inf", "'many'", "12"}
+            assert all(set(u) == {"value"} for _, u in seen)
+            assert app.mode_dropdown.value == "compact" and app.compare_dropdown.value == "standard"
+            assert app.speed_dropdown.value == "max" and app.truth_checkbox.value is True
+            assert app.param_sliders["delta"].max == 30.0
+            assert not app.play_button.disabled
+            assert app.replay.params == MapParams()
+            assert _buffered(app, app.mode_dropdown) in (None, "compact")
+            # a valid value still works, and every viewer's controls keep working
+            _send(sender, app.mode_dropdown, {"value": "standard"})
+            deadline = time.monotonic() + 10
+            while app.streamer.shown != (MapMode.STANDARD,) and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert app.streamer.shown == (MapMode.STANDARD,)
+            assert "standard" in {u.get("value") for _, u in _drain(viewer)}
+        app.truth_checkbox.value = False
+        sent: list[str] = []
+
+        class FakeClient:
+            def send_file_download(self, name: str, content: bytes, **_: object) -> None:
+                sent.append(name)
+
+        app._download(FakeClient(), "g2o")  # type: ignore[arg-type]
+        assert sent == ["standard.g2o"]
+
+
+def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Path) -> None:
+    with running_app(short_bag, autoplay=False) as app:
+        wait(app)
+        before = {
+            "alpha": app.param_sliders["alpha"].value,
+            "delta": app.param_sliders["delta"].value,
+            "seek": app.seek_slider.value,
+            "speed": app.speed_dropdown.value,
+            "map": app.mode_dropdown.value,
+        }
+        refused = app.gate.refused
+        with _client(app.server.get_port()) as ws:  # never says hello
+            _send(ws, app.param_sliders["alpha"], {"value": 1e308})
+            _send(ws, app.param_sliders["delta"], {"value": 1.0})
+            _send(ws, app.seek_slider, {"value": float("inf")})
+            _send(ws, app.speed_dropdown, {"value": "bogus"})
+            _send(ws, app.mode_dropdown, {"value": "standard"})  # valid, but not yet a client
+            deadline = time.monotonic() + 10
+            while app.gate.refused < refused + 5 and time.monotonic() < deadline:
+                time.sleep(0.01)
+        assert app.gate.refused == refused + 5
+        after = {
+            "alpha": app.param_sliders["alpha"].value,
+            "delta": app.param_sliders["delta"].value,
+            "seek": app.seek_slider.value,
+            "speed": app.speed_dropdown.value,
+            "map": app.mode_dropdown.value,
+        }
+        assert after == before
+        assert app.replay.params == MapParams()
+        # what a client joining later receives: the values in force
+        assert _buffered(app, app.param_sliders["alpha"]) in (None, before["alpha"])
+        assert _buffered(app, app.param_sliders["delta"]) in (None, before["delta"])
+        assert _buffered(app, app.speed_dropdown) in (None, before["speed"])
+        with _client(app.server.get_port()) as late:
+            _say_hello(late)
+            values = [u["value"] for _, u in _drain(late, 1.0) if "value" in u]
+        assert not {1e308, 1.0, float("inf"), "bogus"} & set(values)
+
+
+def test_html_replay_checks_its_folder_before_rendering(
+    short_bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import app.server.export as export
+    from cogmap_core.errors import OutputError
+
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    with running_app(short_bag) as app:
+        wait(app)
+
+        def never(*args: object, **kwargs: object) -> str:
+            raise AssertionError("rendered although the file cannot be written")
+
+        with monkeypatch.context() as m:
+            m.setattr(export, "html_replay", never)
+            with pytest.raises(OutputError, match=f"cannot create {blocker}/sub"):
+                save_html_replay(app.replay, (MapMode.COMPACT,), blocker / "sub" / "r.html")
+        umask = __import__("os").umask(0o022)
+        try:
+            out = save_html_replay(app.replay, (MapMode.COMPACT,), tmp_path / "r.html", 5, 0.5)
+        finally:
+            __import__("os").umask(umask)
+        assert out.stat().st_mode & 0o777 == 0o644
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "r.html"]

@@ -13,6 +13,7 @@ client joining late is sent the current state by viser.
 from __future__ import annotations
 
 import html
+import logging
 import math
 import threading
 import time
@@ -38,14 +39,20 @@ from app.server.scene import (
     SceneStreamer,
     cluster_color,
 )
+from app.server.validation import GuiGate, boolean, choice, click, number, text
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams, parameter_range
 from cogmap_core.datasets import BagTopics
 from cogmap_core.errors import CogmapError, ParameterError
+from cogmap_core.evaluation import LayoutFidelity
+from cogmap_core.event_file import KIND_LINK
 from cogmap_core.events import LinkToVertex
 from cogmap_core.frames import EventStep, Frame
-from cogmap_core.slam import EventLog
+from cogmap_core.session_file import SessionMeta
+from cogmap_core.slam import EventLog, SlamSession
 from cogmap_core.sources.detect import LogOptions
+
+log = logging.getLogger(__name__)
 
 MODE_LABELS: dict[str, MapMode] = {m.value: m for m in MapMode}
 SPEEDS: dict[str, float] = {
@@ -62,25 +69,25 @@ CHART_POINTS = 400
 RECENT_LINKS = 8
 
 
-def recent_links(
-    log: EventLog, frames: int, count: int, total: int | None = None
-) -> list[tuple[float, int, float | None]]:
+def recent_links(log: EventLog, frames: int, count: int) -> list[tuple[float, int, float | None]]:
     """The last ``count`` links of the first ``frames`` frames: (time, target, score), in order.
 
-    ``total``: the number of links in those frames, when the caller knows it.
+    Read from the log's columns (the score is None where the link has none).
     """
-    end = log.frame_end[frames - 1] if frames else 0
-    if total is None:
-        total = sum(1 for e in log.events[:end] if type(e) is LinkToVertex)
-    out: list[tuple[float, int, float | None]] = []
-    k = total
-    for event in reversed(log.events[:end]):
-        if type(event) is LinkToVertex:
-            k -= 1
-            out.append((event.time, event.target, log.link_score(k)))
-            if len(out) == count:
-                break
-    return out[::-1]
+    end = int(log.frame_end[frames - 1]) if frames else 0
+    if count <= 0 or end <= 0:
+        return []
+    columns = log.columns(end)
+    links = np.flatnonzero(columns["kind"] == KIND_LINK)[-count:]
+    return [
+        (t, r, None if math.isnan(score) else score)
+        for t, r, score in zip(
+            columns["time"][links].tolist(),
+            columns["ref"][links].tolist(),
+            columns["score"][links].tolist(),
+            strict=True,
+        )
+    ]
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +136,10 @@ def clamp_to_slider(spec: SliderSpec, value: float) -> float | None:
     return min(max(v, spec.low), spec.high)
 
 
+def _log_refusal(message: str) -> None:
+    log.warning("GUI value from a client %s", message)
+
+
 class _RateLimit:
     def __init__(self, hz: float) -> None:
         self.period = 1.0 / hz if hz > 0 else 0.0
@@ -161,6 +172,8 @@ class CogmapApp:
         log: how to read a log (ignored for bags).
         defaults: what "reset" returns to (default: the paper's values; for logs, the
             defaults of that kind of input).
+        resume: a loaded session to show and continue on the bag (see :class:`Replay`); its
+            parameters are the sliders' initial values.
 
     """
 
@@ -179,6 +192,7 @@ class CogmapApp:
         fmt: str | None = None,
         log: LogOptions | None = None,
         defaults: MapParams | None = None,
+        resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
         self.defaults = defaults or MapParams()
@@ -194,6 +208,7 @@ class CogmapApp:
         self._chart_limit = _RateLimit(1.0)
         self._ate_limit = _RateLimit(1.0)
         self._ate: dict[MapMode, float | None] = {}
+        self._fidelity: dict[MapMode, LayoutFidelity | None] = {}
         self._log_key: tuple[Any, ...] | None = None
         self._links_counted = (0, 0)  # (events counted, LinkToVertex among them)
         self._suppress_param_events = False
@@ -212,9 +227,13 @@ class CogmapApp:
             topics=topics,
             fmt=fmt,
             log=log,
+            resume=resume,
         )
+        if resume is not None:
+            params = resume[0].params
         self.streamer = SceneStreamer(server)
         self._build_gui(params or MapParams(), speed, autoplay)
+        self._guard_inputs()
         self._apply_view()
 
     # ================================================================== lifecycle
@@ -337,6 +356,38 @@ class CogmapApp:
         self.sizes_button.on_click(lambda event: self._download(event.client, "sizes"))
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
+    def _guard_inputs(self) -> None:
+        """Check every value a client can send before viser applies it (see validation.py)."""
+        gate = self.gate = GuiGate(self.server, note=_log_refusal)
+        maps = tuple(MODE_LABELS)
+        gate.guard(self.mode_dropdown, choice(maps))
+        gate.guard(self.compare_dropdown, choice(maps))
+        gate.guard(self.speed_dropdown, choice(tuple(SPEEDS)))
+        gate.guard(self.compare_checkbox, boolean())
+        gate.guard(self.truth_checkbox, boolean())
+        for button in (
+            self.top_button,
+            self.view3d_button,
+            self.play_button,
+            self.step_button,
+            self.restart_button,
+            self.reset_button,
+            self.g2o_button,
+            self.summary_button,
+            self.sizes_button,
+            self.replay_button,
+        ):
+            gate.guard(button, click())
+        gate.guard(self.seek_slider, number(0.0, lambda: float(self.seek_slider.max)))
+        for spec in SLIDERS + ADVANCED_SLIDERS:
+            gate.guard(
+                self.param_sliders[spec.name], number(spec.low, spec.high), note=self._param_note
+            )
+        gate.guard(self.replay_path, text())
+
+    def _param_note(self, message: str) -> None:
+        self.params_md.content = message
+
     def _add_param_slider(self, spec: SliderSpec, params: MapParams) -> None:
         value = clamp_to_slider(spec, getattr(params, spec.name))
         slider = self.server.gui.add_slider(
@@ -354,9 +405,9 @@ class CogmapApp:
     @property
     def shown_modes(self) -> tuple[MapMode, ...]:
         """The displayed map and, side by side, the compared one."""
-        first = MODE_LABELS[self.mode_dropdown.value]
+        first = MODE_LABELS.get(self.mode_dropdown.value, MapMode.COMPACT)
         if self.compare_checkbox.value:
-            second = MODE_LABELS[self.compare_dropdown.value]
+            second = MODE_LABELS.get(self.compare_dropdown.value, MapMode.STANDARD)
             if second is not first:
                 return (first, second)
         return (first,)
@@ -524,8 +575,7 @@ class CogmapApp:
         if self.camera_image.visible:
             self.camera_image.visible = False
         with self.replay.lock:
-            total = self._loop_closures_detected()
-            recent = recent_links(self.replay.session.log, self.replay.cursor, RECENT_LINKS, total)
+            recent = recent_links(self.replay.session.log, self.replay.cursor, RECENT_LINKS)
         rows = "".join(
             f"<tr><td>{t:.1f}</td><td>{target}</td><td>{'–' if score is None else f'{score:.3f}'}"
             "</td></tr>"
@@ -560,7 +610,7 @@ class CogmapApp:
     def _publish_scene(self) -> None:
         session = self.replay.session
         log = session.log
-        truth = log.ground_truth if log.ground_truth else None
+        truth = log.ground_truth if len(log.ground_truth) else None
         count = min(self.replay.cursor, len(log.ground_truth))
         self.streamer.publish(dict(session.maps.maps), truth, count)
 
@@ -636,6 +686,8 @@ class CogmapApp:
         modes = self.streamer.shown
         if self._ate_limit.due(forced):
             self._ate = {m: session.ate(session.maps[m]) for m in modes}
+            radius = session.evaluation.layout_radius  # the input kind's (8 cm for bags)
+            self._fidelity = {m: session.layout_fidelity(session.maps[m], radius) for m in modes}
         t = 0.0 if math.isnan(r.frame_time) else r.frame_time
         rows = [
             ("time", "time", f"{t:.1f} / {r.duration:.1f} s"),
@@ -648,7 +700,11 @@ class CogmapApp:
             for key, label, value in rows
         )
         per_map: list[tuple[str, str, list[str]]] = []
-        stats = [self._map_counts(session.maps[m], self._ate.get(m)) for m in modes]
+        stats = [
+            self._map_counts(session.maps[m], self._ate.get(m), self._fidelity.get(m))
+            for m in modes
+        ]
+        radius = f"{session.evaluation.layout_radius * 100:g} cm"
         for key, label in (
             ("vertices", "vertices"),
             ("edges", "edges"),
@@ -656,6 +712,8 @@ class CogmapApp:
             ("clusters", "clusters"),
             ("optimizations", "optimizations"),
             ("ate", "ATE (m)"),
+            ("completeness", f"completeness ({radius})"),
+            ("correctness", f"correctness ({radius})"),
         ):
             per_map.append((key, label, [s[key] for s in stats]))
         body += f"<tr><td></td>{head}</tr>"
@@ -674,7 +732,12 @@ class CogmapApp:
             self.counters_html.content = content
 
     @staticmethod
-    def _map_counts(cmap: CognitiveMap, ate: float | None) -> dict[str, str]:
+    def _map_counts(
+        cmap: CognitiveMap, ate: float | None, fidelity: LayoutFidelity | None
+    ) -> dict[str, str]:
+        def share(value: float | None) -> str:
+            return "–" if value is None or math.isnan(value) else f"{value:.3f}"
+
         return {
             "vertices": str(cmap.num_vertices),
             "edges": str(cmap.num_edges),
@@ -682,13 +745,16 @@ class CogmapApp:
             "clusters": str(len(cmap.clusters)),
             "optimizations": str(len(cmap.optimizations)),
             "ate": "–" if ate is None else f"{ate:.3f}",
+            "completeness": share(None if fidelity is None else fidelity.completeness),
+            "correctness": share(None if fidelity is None else fidelity.correctness),
         }
 
     def _update_chart(self) -> None:
         session = self.replay.session
         order = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
         histories = [session.maps[m].size_history() for m in order]
-        end = 0.0 if math.isnan(self.replay.frame_time) else self.replay.frame_time
+        end = self.replay.data_time  # session data time (the bag's time when not resuming)
+        end = 0.0 if math.isnan(end) else end
         times = np.linspace(0.0, max(end, 1e-3), CHART_POINTS)
         data: list[np.ndarray] = [times]
         for t, v, e in histories:

@@ -13,9 +13,7 @@ import contextlib
 import io
 import json
 import math
-import os
 import socket
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -28,7 +26,8 @@ from app.server.scene import SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
-from cogmap_core.events import LinkToVertex, MapEvent, Odometry
+from cogmap_core.events import MapEvent, Odometry
+from cogmap_core.fileio import check_writable, output_error, write_text_atomic
 from cogmap_core.g2o import format_g2o
 from cogmap_core.slam import EventLog, SlamSession
 
@@ -60,19 +59,7 @@ def g2o_bytes(cmap: CognitiveMap) -> bytes:
 
 def truncated_log(log: EventLog, frames: int) -> EventLog:
     """A copy of the first ``frames`` frames of ``log``."""
-    frames = max(0, min(frames, log.frames))
-    end = log.frame_end[frames - 1] if frames else 0
-    events = list(log.events[:end])
-    links = sum(1 for e in events if isinstance(e, LinkToVertex))
-    truth = log.ground_truth[:frames] if log.has_ground_truth() else list(log.ground_truth)
-    return EventLog(
-        events=events,
-        frame_end=list(log.frame_end[:frames]),
-        frame_time=list(log.frame_time[:frames]),
-        ground_truth=list(truth),
-        link_robot_truth=list(log.link_robot_truth[:links]),
-        link_scores=list(log.link_scores[:links]),
-    )
+    return log.truncated(frames)
 
 
 def view_session(replay: Replay) -> SlamSession:
@@ -94,8 +81,8 @@ def summary_dict(replay: Replay) -> dict[str, object]:
     """``summary.json`` of the frames replayed so far (call with ``replay.lock`` held)."""
     view = view_session(replay)
     times = view.log.frame_time
-    first = times[0] if times else 0.0
-    last = times[-1] if times else 0.0
+    first = float(times[0]) if len(times) else 0.0
+    last = float(times[-1]) if len(times) else 0.0
     warnings: dict[str, object] = {}
     source: dict[str, object] = {}
     if replay.reader is not None:
@@ -193,8 +180,12 @@ def save_html_replay(
 ) -> Path:
     """Write the HTML replay of ``replay`` up to its current frame to ``path`` (atomically).
 
+    The folder is checked writable before the page is rendered; the file gets the user's
+    normal permissions, and a failed write leaves an existing file as it was.
+
     Raises:
-        InputFileError: ``path`` does not end in ``.html`` or its folder cannot be made.
+        InputFileError: ``path`` does not end in ``.html``, or is something else than a replay.
+        OutputError: the folder cannot be made or written, or the disk is full.
 
     """
     path = Path(path)
@@ -210,17 +201,14 @@ def save_html_replay(
         finish = replay.at_end
     if log.frames == 0:
         raise InputFileError("nothing replayed yet: play some frames before saving a replay")
+    try:  # before the (long) rendering: a folder we cannot write costs nothing
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(path.parent, exc, "create") from None
+    check_writable(path.parent)
     page = html_replay(log, params, modes, finish, keyframes, seconds)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        write_text_atomic(path, page)
     except OSError as exc:
-        raise InputFileError(f"cannot write {path}: {exc.strerror}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(page)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        raise output_error(path, exc) from None
     return path

@@ -21,25 +21,28 @@ the maps from another thread takes :attr:`Replay.lock`.
 
 from __future__ import annotations
 
+import array
 import bisect
+import copy
 import math
 import sys
 import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Protocol
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagTopics
+from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError
+from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEndConfig
+from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, SlamSession
 from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
 
@@ -155,6 +158,15 @@ class Replay:
         priority: maps rebuilt first after a parameter change (the displayed ones).
         fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
         log: how to read a log (ignored for bags).
+        resume: a saved session and its metadata (:func:`~cogmap_core.session_file.load_session`)
+            to continue: its maps are shown at once and grow with the bag's frames, which follow
+            the session's data as if the bags were one. Restarting or seeking goes back no
+            further than the session's end. Bags only: a log with a session is refused.
+
+    Times: :attr:`frame_time`, :attr:`duration` and :meth:`seek` are positions in the bag;
+    the session's data time of bag time ``t`` is ``t +`` :attr:`time_offset` (0 unless
+    resuming), and :attr:`cursor` counts the session's frames (those of the resumed session
+    first, :attr:`base_frames` of them).
 
     """
 
@@ -171,6 +183,7 @@ class Replay:
         topics: BagTopics | None = None,
         fmt: str | None = None,
         log: LogOptions | None = None,
+        resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> None:
         """Set up the replay (nothing is read until :meth:`start`)."""
         self.bag_source = bag
@@ -200,7 +213,17 @@ class Replay:
         self._generation = 0  # bumped by every request that should interrupt a rebuild
         # worker-owned state (read by others under `lock`)
         self.session = SlamSession(self._target_params, self.frontend_config)
-        self.cursor = 0  # frames applied to the maps
+        self.resume_meta: SessionMeta | None = None
+        self._base_maps: dict[MapMode, CognitiveMap] = {}
+        if resume is not None:
+            self.session, self.resume_meta = resume
+            self.frontend_config = self.session.frontend.config
+            self._target_params = self.session.params
+            self._base_maps = {m: copy.deepcopy(c) for m, c in self.session.maps.maps.items()}
+        self._base_params = self.session.params
+        self.base_frames = self.session.log.frames  # frames of the resumed session
+        self.time_offset = 0.0  # session data time of the bag's time 0
+        self.cursor = self.base_frames  # frames applied to the maps
         self.at_end = False
         self.state = PlaybackState.LOADING
         self.message = "opening the bag"
@@ -208,7 +231,8 @@ class Replay:
         self.reader: Source | None = None
         self.duration = 0.0
         self.total_frames = 0
-        self.view_templates: list[int | None] = []
+        # per frame of the bag, the view template it matched (-1: none); 8 bytes a frame
+        self.view_templates = array.array("q")
         self.rebuilds: list[RebuildRecord] = []
         self.frame_time = math.nan  # data time of the last frame applied
         self.processing_s = 0.0  # wall time spent applying frames (front end + maps)
@@ -429,12 +453,21 @@ class Replay:
             path = self._resolve_bag()
             self.bag_path = path
             fmt = resolve_format(path, self.format)
+            if self.resume_meta is not None and not KINDS[fmt].has_camera:
+                raise ParameterError(
+                    f"{path} is a log of odometry and place recognition ({fmt}): sessions are "
+                    "for bags; replay it without a session to resume"
+                )
             reader = open_source(
                 path, fmt, topics=self.topics, image_scale=self.image_scale, log=self.log_options
             )
             self.has_camera = KINDS[fmt].has_camera
             if self.session.log.frames == 0:  # the front end is chosen for the input
                 self._choose_frontend(path, fmt)
+            if self.resume_meta is not None and self.base_frames:
+                assert isinstance(reader, BagReader)
+                end = float(self.session.log.frame_time[self.base_frames - 1])
+                self.time_offset = self.resume_meta.resume_offset(reader.start_stamp, end)
         except CogmapError as exc:
             self._fail(str(exc))
             return
@@ -447,7 +480,7 @@ class Replay:
                 self.reader.close()
             self.reader = reader
             self.duration = reader.info.duration
-            self.total_frames = reader.info.frame_count
+            self.total_frames = self.base_frames + reader.info.frame_count
         self.message = ""
         self._start_pass(0.0)
         with self._cond:
@@ -483,7 +516,18 @@ class Replay:
         self._notify_status()
         return source(progress)
 
+    def _bag_time(self, data_time: float) -> float:
+        """Position in the bag of a session data time."""
+        return float(data_time) - self.time_offset
+
+    @property
+    def data_time(self) -> float:
+        """Session data time of the last frame applied (nan before any)."""
+        k = self.cursor
+        return float(self.session.log.frame_time[k - 1]) if k else math.nan
+
     def _start_pass(self, start_time: float) -> None:
+        """Read the bag from bag time ``start_time``."""
         self._close_pass()
         assert self.reader is not None
         self._frames = self.reader.frames(start_time)
@@ -539,6 +583,8 @@ class Replay:
         session = self.session
         log = session.log
         started = time.perf_counter()
+        if self.time_offset:
+            frame = replace(frame, time=frame.time + self.time_offset)
         with self.lock:
             k = self.cursor
             if k < log.frames:
@@ -551,13 +597,14 @@ class Replay:
                 lo = log.frame_end[k - 1] if k else 0
                 for event in log.events[lo : log.frame_end[k]]:
                     session.maps.apply(event)
-                view = self.view_templates[k]
+                matched = self.view_templates[k - self.base_frames]
+                view = None if matched < 0 else matched
             else:
                 out = session.process(frame)
-                self.view_templates.append(out.view_template)
+                self.view_templates.append(-1 if out.view_template is None else out.view_template)
                 view = out.view_template
             self.cursor = k + 1
-            self.frame_time = frame.time
+            self.frame_time = self._bag_time(frame.time)
             self.processing_s += time.perf_counter() - started
         try:
             self.listener.on_frame(self, frame, view)
@@ -571,7 +618,7 @@ class Replay:
             if self.cursor == session.log.frames:
                 session.finish()
             elif self.cursor:
-                session.maps.finish(session.log.frame_time[self.cursor - 1])
+                session.maps.finish(float(session.log.frame_time[self.cursor - 1]))
             self.at_end = True
             self.processing_s += time.perf_counter() - started
         self._close_pass()
@@ -607,10 +654,11 @@ class Replay:
             with self._cond:
                 self.state = PlaybackState.LOADING
         log = self.session.log
-        cached_end = log.frame_time[-1] if log.frames else -math.inf
+        cached_end = self._bag_time(log.frame_time[-1]) if log.frames else -math.inf
         try:
             if target <= cached_end or self.session.finished:
-                self._seek_to_frame(bisect.bisect_right(log.frame_time, target))
+                k = bisect.bisect_right(log.frame_time, target + self.time_offset)
+                self._seek_to_frame(k)
             else:
                 # Beyond what the front end has seen: replay the cache to its end, then run the
                 # front end as fast as possible up to the target.
@@ -631,21 +679,33 @@ class Replay:
             params = self._target_params
             self._params_request = None
         log = self.session.log
-        k = max(0, min(k, log.frames))
-        maps = {mode: self._build_map(mode, params, k, False, generation) for mode in self._order()}
+        base = self.base_frames
+        k = max(base, min(k, log.frames))
+        if k == base and self._base_maps and params == self._base_params:
+            # back to the resumed state: the session's own maps (nothing to rebuild)
+            maps = {mode: copy.deepcopy(cmap) for mode, cmap in self._base_maps.items()}
+        else:
+            maps = {
+                mode: self._build_map(mode, params, k, False, generation) for mode in self._order()
+            }
         with self.lock:
             self.session.adopt(params, maps)
             self.session.finished = False
-            if k == 0:
+            if k == base:
                 self.processing_s = 0.0
             self.cursor = k
             self.at_end = False
-            self.frame_time = log.frame_time[k - 1] if k else math.nan
+            self.frame_time = self._bag_time(log.frame_time[k - 1]) if k > base else math.nan
         if self.state is not PlaybackState.ERROR:
             if k < log.frames:
-                self._start_pass(max(0.0, log.frame_time[k] - 1e-3) if k else 0.0)
+                start = max(0.0, self._bag_time(log.frame_time[k]) - 1e-3) if k > base else 0.0
             else:
-                self._start_pass(min(log.frame_time[k - 1] + 1e-4, self.duration) if k else 0.0)
+                start = (
+                    min(self._bag_time(log.frame_time[k - 1]) + 1e-4, self.duration)
+                    if k > base
+                    else 0.0
+                )
+            self._start_pass(start)
         with self._cond:
             if self.state is PlaybackState.LOADING:
                 self.state = PlaybackState.PAUSED

@@ -1,7 +1,8 @@
 """Writing iRat-layout ROS1 bags with rosbags (no ROS installation needed).
 
-The bag is written under a temporary name next to the target and renamed when it is complete,
-so an interrupted run never leaves a half-written bag under the final name.
+The bag is written under a temporary name next to the target (``.<name>.partial-<pid>``) and
+renamed when it is complete, so an interrupted run never leaves a half-written bag under the
+final name; such leftovers of killed processes are removed by the next writer of that name.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from cogmap_core.datasets.topics import (
     ODOMETRY_TYPE,
     BagTopics,
 )
+from cogmap_core.fileio import partial_name, remove_stale
 
 _TYPESTORE = get_typestore(Stores.ROS1_NOETIC)
 _T = _TYPESTORE.types
@@ -83,7 +85,8 @@ class IratBagWriter:
             )
         if not self.path.parent.is_dir():
             raise BagError(f"folder {self.path.parent} does not exist; create it first")
-        self._tmp = self.path.with_name(f".{self.path.name}.partial-{os.getpid()}")
+        remove_stale(self.path.parent, f".{self.path.name}.partial-*")  # of killed writers
+        self._tmp = self.path.with_name(partial_name(self.path.name))
         if self._tmp.exists():
             self._tmp.unlink()
         self._writer = Writer(self._tmp)

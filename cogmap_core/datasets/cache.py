@@ -19,6 +19,7 @@ from pathlib import Path
 
 from cogmap_core.datasets.errors import DatasetCacheError
 from cogmap_core.datasets.generator import MazeConfig, ProgressFn, generate_maze_bag
+from cogmap_core.fileio import remove_stale
 
 try:  # POSIX advisory locks; without them concurrent first uses may generate twice
     import fcntl
@@ -93,9 +94,10 @@ def default_dataset_path(
 
     """
     path = default_dataset_file()
+    folder = path.parent
+    remove_stale(folder, f".{path.name}.partial-*")  # of a generation that was killed
     if path.exists() and not regenerate:
         return path
-    folder = path.parent
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -18,8 +18,17 @@ Conventions (those of OpenRatSLAM):
 Bad data never raises a traceback. The policy, counted in :attr:`BagReader.counters` and
 summarised by :attr:`BagReader.warnings`:
 
-- undecodable JPEG, image of another size than the first, undeserialisable message: skipped
-  (the odometry carries over to the next frame);
+- undecodable JPEG, JPEG that decodes but with libjpeg's "Corrupt JPEG data" / "Premature end
+  of JPEG file" warnings (a scrambled image, see :mod:`.jpeg`), image of another size than the
+  first, undeserialisable message: skipped (the odometry carries over to the next frame);
+- a clock that jumps back (ROS1): the bag's record times are checked in the order the messages
+  were written; where a topic's record time goes back more than
+  :data:`CLOCK_JUMP_TOLERANCE`, the two stretches would interleave in time order. With
+  ``on_clock_jump="drop"`` (default) the messages written after the jump are dropped until that
+  topic's time passes the time it had reached (the overlap); with ``"stop"`` reading ends at the
+  jump. Either way the jump, its size and the messages dropped are counted and warned about
+  when the bag is opened (:attr:`BagReader.open_warnings`). Header stamps that go back while
+  the record time does not are handled per topic (below);
 - image stamp earlier than the previous frame's: frame skipped (frame times never decrease);
 - odometry with NaN/inf velocity: skipped (the next message covers its interval);
 - odometry stamp earlier than the previous one: skipped; after three in a row the clock is taken
@@ -30,7 +39,9 @@ summarised by :attr:`BagReader.warnings`:
 
 Errors (:class:`BagError` and subclasses, one line each): missing file, not a bag, truncated,
 unindexed or corrupt bag, missing camera or odometry topic (listing the topics present), wrong
-camera or odometry message type, a bag none of whose images decode.
+camera or odometry message type, a bag none of whose images decode. A bag that turns out corrupt
+part-way raises when the damage is reached, unless ``on_corrupt="stop"``: the pass then ends
+there (counted as ``corrupt_chunks`` with its time) and the frames read so far stand.
 """
 
 from __future__ import annotations
@@ -54,6 +65,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 
 from cogmap_core.datasets.errors import BagError, BagMessageTypeError, BagTopicError
+from cogmap_core.datasets.jpeg import JpegDecoder
 from cogmap_core.datasets.topics import (
     GROUND_TRUTH_TYPES,
     IMAGE_TYPE,
@@ -76,6 +88,10 @@ _GT_INTERPOLATION_GAP = 1.0  # s
 _GT_HOLD = 0.25  # s
 _CLOCK_RESET_AFTER = 3
 _START_MARGIN = 2.0  # s of data read before start_time (odometry clock, ground truth)
+#: A topic's record time going back by more than this (s) in write order is a clock jump.
+CLOCK_JUMP_TOLERANCE = 0.5
+CLOCK_JUMP_POLICIES = ("drop", "stop")
+CORRUPT_DATA_POLICIES = ("error", "stop")
 
 
 @dataclass(frozen=True)
@@ -131,6 +147,10 @@ class ReadCounters:
     nonfinite_ground_truth: int = 0
     ground_truth_stamps_backwards: int = 0
     frames_without_ground_truth: int = 0
+    corrupt_images: int = 0
+    clock_jumps: int = 0
+    clock_jump_messages_dropped: int = 0
+    corrupt_chunks: int = 0
     first_seen: dict[str, float] = field(default_factory=dict)
 
     def note(self, name: str, time: float) -> None:
@@ -144,7 +164,7 @@ class ReadCounters:
         """One line per kind of problem met, with its count and first time."""
         out = []
         for f in fields(self):
-            if f.name in ("frames", "first_seen"):
+            if f.name in ("frames", "first_seen", *_DESCRIBED_AT_OPEN):
                 continue
             n = getattr(self, f.name)
             if n:
@@ -165,7 +185,15 @@ _WARNING_TEXT = {
     "nonfinite_ground_truth": "ground-truth pose with NaN/inf skipped",
     "ground_truth_stamps_backwards": "ground-truth pose stamped before the previous one skipped",
     "frames_without_ground_truth": "frame without ground truth nearby",
+    "corrupt_images": "camera image with corrupt JPEG data (decoded scrambled) skipped",
+    "clock_jumps": "clock jump back (see the opening warning)",
+    "clock_jump_messages_dropped": "message dropped at a clock jump",
+    "corrupt_chunks": "corrupt bag data: reading stopped there, the frames before it kept",
 }
+
+
+#: Counted per pass but described by :attr:`BagReader.open_warnings` (found when opening).
+_DESCRIBED_AT_OPEN = ("clock_jumps", "clock_jump_messages_dropped")
 
 
 def _yaw(q: Any) -> float:
@@ -240,6 +268,80 @@ def _check_ros1_header(path: Path) -> None:
         )
 
 
+@dataclass(frozen=True)
+class ClockJump:
+    """A jump back of the record clock.
+
+    Attributes:
+        time: data time (s) the clock had reached when it jumped.
+        back: how far it went back (s).
+        dropped: messages dropped because of it (the overlap, or everything after for "stop").
+
+    """
+
+    time: float
+    back: float
+    dropped: int
+
+
+def plan_clock_jumps(
+    connections: list[Connection], policy: str, t0_ns: int
+) -> list[ClockJump] | None:
+    """Drop the messages of ROS1 ``connections`` caught in record-clock jumps; None if none.
+
+    The bag's index lists each message's record time and position; in position (write) order a
+    topic's record time never goes back unless the recorder's clock did. After a jump of more
+    than :data:`CLOCK_JUMP_TOLERANCE`, policy ``"drop"`` removes that topic's messages until its
+    record time passes the time reached before the jump; ``"stop"`` removes everything after the
+    first jump. The removal is done on the reader's index, so dropped messages are never read.
+    Bags without such an index (ROS2) are left alone.
+    """
+    tol_ns = int(CLOCK_JUMP_TOLERANCE * 1e9)
+    per_topic: list[tuple[Connection, list[Any], list[Any]]] = []
+    jumps: list[tuple[int, int, int]] = []  # (high-water ns, back ns, dropped)
+    for conn in connections:
+        indexes = getattr(getattr(conn, "owner", None), "indexes", None)
+        entries = indexes.get(conn.id) if isinstance(indexes, dict) else None
+        if not isinstance(entries, list) or not all(
+            hasattr(e, "chunk_pos") and hasattr(e, "offset") for e in entries[:1]
+        ):
+            return None
+        in_write_order = sorted(entries, key=lambda e: (e.chunk_pos, e.offset))
+        kept: list[Any] = []
+        high: int | None = None
+        resume: int | None = None
+        stopped = False
+        for entry in in_write_order:
+            t = int(entry.time)
+            if stopped or (resume is not None and t < resume):
+                jumps[-1] = (jumps[-1][0], jumps[-1][1], jumps[-1][2] + 1)
+                continue
+            resume = None
+            if high is not None and t < high - tol_ns:
+                jumps.append((high, high - t, 1))
+                stopped = policy == "stop"
+                resume = high
+                continue
+            high = t if high is None else max(high, t)
+            kept.append(entry)
+        if len(kept) != len(entries):
+            per_topic.append((conn, indexes, sorted(kept, key=lambda e: int(e.time))))
+    if not jumps:
+        return None
+    for conn, indexes, kept in per_topic:
+        indexes[conn.id] = kept
+    # topics jump together: report one jump per distinct moment (within the tolerance)
+    jumps.sort()
+    merged: list[list[int]] = []
+    for high, back, dropped in jumps:
+        if merged and high - merged[-1][0] <= tol_ns:
+            merged[-1][1] = max(merged[-1][1], back)
+            merged[-1][2] += dropped
+        else:
+            merged.append([high, back, dropped])
+    return [ClockJump((h - t0_ns) / 1e9, b / 1e9, d) for h, b, d in merged]
+
+
 class BagReader:
     """An open bag with the iRat topics; iterate :meth:`frames` (one pass at a time)."""
 
@@ -249,6 +351,8 @@ class BagReader:
         topics: BagTopics | None = None,
         image_scale: int = 1,
         max_odometry_gap: float = 1.0,
+        on_clock_jump: str = "drop",
+        on_corrupt: str = "error",
     ) -> None:
         """Open and check the bag; see :func:`open_bag`."""
         self._tmpdir: Path | None = None
@@ -263,6 +367,13 @@ class BagReader:
             raise ParameterError(f"image_scale {image_scale} is not supported; use 1, 2, 4 or 8")
         if not (max_odometry_gap > 0):
             raise ParameterError(f"max_odometry_gap {max_odometry_gap} must be > 0 s")
+        if on_clock_jump not in CLOCK_JUMP_POLICIES:
+            raise ParameterError(f"on_clock_jump {on_clock_jump!r} is not 'drop' or 'stop'")
+        if on_corrupt not in CORRUPT_DATA_POLICIES:
+            raise ParameterError(f"on_corrupt {on_corrupt!r} is not 'error' or 'stop'")
+        self.on_clock_jump = on_clock_jump
+        self.on_corrupt = on_corrupt
+        self.clock_jumps: list[ClockJump] = []
         self.path = Path(path)
         self.topics = topics
         self.image_scale = image_scale
@@ -373,6 +484,7 @@ class BagReader:
         # then the image, so odometry stamped at a frame's time belongs to that frame
         self._used = [self.topics.odometry, *([gt_topic] if gt_type else []), self.topics.image]
         self._t0_ns = self._first_stamp_ns()
+        self._handle_clock_jumps()
         return BagInfo(
             path=self.path,
             ros_version=2 if reader.is2 else 1,
@@ -409,17 +521,43 @@ class BagReader:
                     gen.close()
         return t0
 
+    def _handle_clock_jumps(self) -> None:
+        """Find record-clock jumps back (ROS1, write order) and drop or cut what follows."""
+        connections = [c for t in self._used for c in self._conns.get(t, [])]
+        plan = plan_clock_jumps(connections, self.on_clock_jump, self._t0_ns)
+        if plan is None:
+            return
+        self.clock_jumps = plan
+        first = plan[0]
+        dropped = sum(j.dropped for j in plan)
+        times = f"{len(plan)} times, first " if len(plan) > 1 else ""
+        if self.on_clock_jump == "stop":
+            what = f"reading stops there ({dropped} later messages not read)"
+        else:
+            what = (
+                f"{dropped} messages recorded again over the same time were dropped (each topic "
+                "resumes when its clock passes the time it had reached)"
+            )
+        note = (
+            f"the bag's clock jumps back {times}{first.back:.2f} s at t={first.time:.2f} s: {what}"
+        )
+        self.open_warnings.append(note)
+        log.warning("%s", note)
+
     def _require_reader(self) -> AnyReader:
         if self._reader is None:
             raise BagError(f"bag {self.path} is closed; open it again")
         return self._reader
 
-    def _corrupt(self, exc: BaseException, t: float | None) -> BagError:
+    def _corrupt(self, exc: BaseException, t: float | None, stopped: bool = False) -> BagError:
         where = f" near t={t:.2f} s" if t is not None else ""
         detail = " ".join(str(exc).split()) or type(exc).__name__
-        return BagError(
-            f"bag {self.path} is corrupt{where} ({detail}); copy it again or read up to there"
-        )
+        if stopped:
+            return BagError(f"bag {self.path} is corrupt{where} ({detail}); read up to there")
+        advice = "copy it again, or read up to there (cogmap run --until-error)"
+        if t is None:
+            advice = "copy it again"
+        return BagError(f"bag {self.path} is corrupt{where} ({detail}); {advice}")
 
     # ------------------------------------------------------------------------------- access
     @property
@@ -456,12 +594,17 @@ class BagReader:
         reader = self._require_reader()
         self._iterating = True
         counters = ReadCounters()
+        if self.clock_jumps:
+            counters.clock_jumps = len(self.clock_jumps)
+            counters.clock_jump_messages_dropped = sum(j.dropped for j in self.clock_jumps)
+            for name in _DESCRIBED_AT_OPEN:
+                counters.first_seen[name] = self.clock_jumps[0].time
         self.counters = counters
         topics = self.topics
         image_topic, odom_topic = topics.image, topics.odometry
         gt_topic = topics.ground_truth if self._gt_type else None
         gt_type = self._gt_type or ""
-        flag = _DECODE_FLAGS[self.image_scale]
+        decoder = JpegDecoder(_DECODE_FLAGS[self.image_scale])
         t0 = self._t0_ns
         max_gap_ns = int(self.max_odometry_gap * 1e9)
         start_ns = t0 + int(start_time * 1e9)
@@ -502,7 +645,11 @@ class BagReader:
                 try:
                     item = next(messages, None)
                 except Exception as exc:  # damaged chunk or record
-                    raise self._corrupt(exc, now) from None
+                    if self.on_corrupt != "stop":
+                        raise self._corrupt(exc, now) from None
+                    counters.note("corrupt_chunks", now)
+                    log.warning("%s", self._corrupt(exc, now, stopped=True))
+                    break
                 if item is None:
                     break
                 conn, record_ns, raw = item
@@ -552,11 +699,14 @@ class BagReader:
                         counters.note("image_stamps_backwards", now)
                         continue
                     data = np.asarray(msg.data, dtype=np.uint8)
-                    image = cv2.imdecode(data, flag) if data.size else None
+                    image, damage = decoder.decode(data) if data.size else (None, None)
                     if image is None:
                         counters.note("undecodable_images", now)
                         continue
                     images_decoded += 1
+                    if damage is not None:
+                        counters.note("corrupt_images", now)
+                        continue
                     if shape is None:
                         shape = image.shape
                     elif image.shape != shape:
@@ -604,6 +754,7 @@ class BagReader:
                 )
         finally:
             messages.close()
+            decoder.close()
             self._iterating = False
 
     # ------------------------------------------------------------------------------ closing
@@ -642,6 +793,8 @@ def open_bag(
     topics: BagTopics | None = None,
     image_scale: int = 1,
     max_odometry_gap: float = 1.0,
+    on_clock_jump: str = "drop",
+    on_corrupt: str = "error",
 ) -> BagReader:
     """Open an iRat-layout bag for streaming.
 
@@ -651,14 +804,23 @@ def open_bag(
         image_scale: 1, 2, 4 or 8: decode JPEGs at that reduction (fast DCT-domain scaling);
             images are then ``240/scale x 416/scale`` for iRat frames.
         max_odometry_gap: longer odometry intervals (s) contribute no motion (counted).
+        on_clock_jump: ``"drop"`` the messages recorded again after the record clock jumps back
+            (default) or ``"stop"`` reading at the first jump (see the module docstring).
+        on_corrupt: ``"error"`` (default): damaged data part-way raises :class:`BagError`;
+            ``"stop"``: the pass ends there, keeping the frames read so far (counted).
 
     Raises:
         BagError: missing file, not a bag, truncated / unindexed / corrupt bag.
         BagTopicError: a required topic is missing (the message lists those present).
         BagMessageTypeError: the camera or odometry topic has the wrong message type.
-        ParameterError: bad ``image_scale`` or ``max_odometry_gap``.
+        ParameterError: bad ``image_scale``, ``max_odometry_gap`` or policy.
 
     """
     return BagReader(
-        path, topics=topics, image_scale=image_scale, max_odometry_gap=max_odometry_gap
+        path,
+        topics=topics,
+        image_scale=image_scale,
+        max_odometry_gap=max_odometry_gap,
+        on_clock_jump=on_clock_jump,
+        on_corrupt=on_corrupt,
     )

@@ -181,6 +181,18 @@ class FrontEndConfig:
         """Template offsets tried by the matcher: ``0, step, ..., 2 * vt_shift_match``."""
         return tuple(range(0, 2 * self.vt_shift_match + 1, self.vt_step_match))
 
+    def minimum_image_size(self, scale: int = 1) -> tuple[int, int]:
+        """Smallest camera image ``(width, height)`` whose crop covers the template pixel for pixel.
+
+        Smaller images would be magnified into the template and give meaningless views. With
+        ``scale`` the size is that of the recorded image decoded at ``1/scale``.
+        """
+        crop_x = (self.image_crop_x_max - self.image_crop_x_min) / self.reference_image_width
+        crop_y = (self.image_crop_y_max - self.image_crop_y_min) / self.reference_image_height
+        width = math.ceil(self.template_x_size / crop_x - 1e-9)
+        height = math.ceil(self.template_y_size / crop_y - 1e-9)
+        return width * scale, height * scale
+
     def with_changes(self, **changes: float) -> FrontEndConfig:
         """Return a copy with some parameters changed (validated)."""
         unknown = set(changes) - {f.name for f in fields(self)}

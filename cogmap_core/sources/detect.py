@@ -80,7 +80,7 @@ class LogOptions:
 
 Source = BagReader | LogReader
 """A reader of any kind: ``info`` (``duration``, ``frame_count``), ``frames(start_time)``,
-``counters`` and ``close()``."""
+``counters``, ``warnings`` and ``close()`` (a context manager)."""
 
 
 def detect_format(path: str | Path) -> str:
@@ -136,6 +136,8 @@ def open_source(
     topics: BagTopics | None = None,
     image_scale: int = 4,
     log: LogOptions | None = None,
+    on_clock_jump: str = "drop",
+    on_corrupt: str = "error",
 ) -> Source:
     """Open any input for streaming (format detected from the content unless given).
 
@@ -145,6 +147,9 @@ def open_source(
         topics: bag topics (bags only).
         image_scale: JPEG decode reduction (bags only).
         log: how to read a log (logs only).
+        on_clock_jump: where a bag's clock jumps back, ``drop`` or ``stop`` (bags only; see
+            :func:`~cogmap_core.datasets.rosbag_reader.open_bag`).
+        on_corrupt: a bag corrupt part-way, ``error`` or ``stop`` (bags only).
 
     Raises:
         CogmapError: the input cannot be read (one line naming the problem).
@@ -158,7 +163,13 @@ def open_source(
                 "--loops and --ground-truth belong to logs; a bag's ground truth is a topic "
                 "(--gt-topic)"
             )
-        return open_bag(path, topics=topics, image_scale=image_scale)
+        return open_bag(
+            path,
+            topics=topics,
+            image_scale=image_scale,
+            on_clock_jump=on_clock_jump,
+            on_corrupt=on_corrupt,
+        )
     if kind == "tuc":
         if log.loops is not None:
             raise ParameterError("--loops belongs to CSV logs; a TUC input file holds its loops")

@@ -541,6 +541,11 @@ class LogReader:
         self._times = [s.time for s in self.steps]
 
     @property
+    def warnings(self) -> list[str]:
+        """Problems met reading the log that did not stop it, one line each (empty when clean)."""
+        return list(self.counters.warnings)
+
+    @property
     def map_params(self) -> MapParams:
         """Default map parameters for this kind of input."""
         return LOG_MAP_PARAMS

@@ -1,0 +1,212 @@
+"""Safe file output: atomic writes with normal permissions, writability probes, stale leftovers.
+
+Every file cogmap writes goes through a temporary name in the target's folder and is renamed
+into place when complete (:func:`atomic_writer`), so a reader never sees a half-written file and
+an interrupted or failed write leaves the previous file intact. Temporary files are created with
+mode ``0o666`` minus the umask -- the permissions any other file of the user gets (not the
+``0o600`` of :func:`tempfile.mkstemp`).
+
+Temporary names carry the writing process's id (``...partial-<pid>``) so that leftovers of a
+killed process can be told from the work of a live one and removed (:func:`remove_stale`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import re
+import secrets
+import shutil
+import signal
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO, Any
+
+from cogmap_core.errors import OutputError
+
+_PID_SUFFIX = re.compile(r"\.partial-(\d+)(?:\.[0-9a-f]+)?$")
+
+#: What to do about each kind of write failure (errno -> advice).
+_ADVICE = {
+    errno.ENOSPC: "the disk is full; free some space or write somewhere else",
+    errno.EDQUOT: "the disk quota is exceeded; free some space or write somewhere else",
+    errno.EROFS: "the file system is read-only; write somewhere else",
+    errno.EACCES: "permission denied; write somewhere else or fix the folder's permissions",
+    errno.EPERM: "permission denied; write somewhere else or fix the folder's permissions",
+    errno.ENOENT: "the folder does not exist; create it first",
+    errno.ENOTDIR: "a part of the path is not a folder; check the path",
+    errno.EISDIR: "a folder is in the way; move it or write somewhere else",
+}
+
+
+def describe_os_error(exc: OSError) -> str:
+    """A short description of a failed write: the system's reason and what to do."""
+    reason = exc.strerror or type(exc).__name__
+    advice = _ADVICE.get(exc.errno or 0, "check the folder and the free space")
+    return f"{reason} ({advice})"
+
+
+def output_error(target: Path | str, exc: OSError, what: str = "write") -> OutputError:
+    """The one-line :class:`OutputError` for an :class:`OSError` met writing ``target``."""
+    return OutputError(f"cannot {what} {target}: {describe_os_error(exc)}")
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with id ``pid`` exists (ours counts as alive)."""
+    if pid == os.getpid():
+        return True
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def partial_name(name: str, pid: int | None = None) -> str:
+    """The hidden temporary name ``.<name>.partial-<pid>`` of ``name`` while it is written."""
+    return f".{name}.partial-{os.getpid() if pid is None else pid}"
+
+
+def remove_stale(folder: Path, pattern: str) -> list[Path]:
+    """Delete leftovers of killed processes matching ``pattern`` (a glob) in ``folder``.
+
+    Only names ending in ``.partial-<pid>`` (optionally followed by ``.<hex>``) whose process
+    no longer exists are removed (files, or folders with everything in them). Returns what was
+    removed; errors are ignored (a leftover that cannot be removed is harmless).
+    """
+    removed: list[Path] = []
+    try:
+        candidates = sorted(folder.glob(pattern))
+    except OSError:
+        return removed
+    for path in candidates:
+        match = _PID_SUFFIX.search(path.name)
+        if match is None or pid_alive(int(match.group(1))):
+            continue
+        try:
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path)
+            else:
+                path.unlink()
+        except OSError:
+            continue
+        removed.append(path)
+    return removed
+
+
+def create_file(path: Path, exclusive: bool = True) -> int:
+    """Open ``path`` for writing with mode ``0o666`` minus the umask; return the descriptor."""
+    flags = os.O_WRONLY | os.O_CREAT | (os.O_EXCL if exclusive else os.O_TRUNC)
+    flags |= getattr(os, "O_CLOEXEC", 0)
+    return os.open(path, flags, 0o666)
+
+
+def check_writable(folder: Path) -> None:
+    """Create and remove a probe file in ``folder``.
+
+    Raises:
+        OutputError: the folder is missing, read-only, full or not ours to write.
+
+    """
+    probe = folder / f".cogmap-probe-{os.getpid()}-{secrets.token_hex(4)}"
+    try:
+        fd = create_file(probe)
+        try:
+            os.write(fd, b"x")
+        finally:
+            os.close(fd)
+        probe.unlink()
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            probe.unlink()
+        raise OutputError(f"cannot write in {folder}: {describe_os_error(exc)}") from None
+
+
+@contextlib.contextmanager
+def atomic_writer(
+    path: Path, binary: bool = False, newline: str | None = None
+) -> Iterator[IO[Any]]:
+    """Write ``path`` (UTF-8 text, or bytes if ``binary``) through a temporary file beside it.
+
+    The temporary file ``.<name>.partial-<pid>.<hex>`` gets the user's normal permissions and is
+    flushed to disk before the rename. On any exception (including Ctrl-C) it is deleted and
+    ``path`` is left as it was.
+
+    Raises:
+        OSError: the folder cannot be written (the caller words the message, see
+            :func:`output_error`).
+
+    """
+    path = Path(path)
+    tmp = path.with_name(f"{partial_name(path.name)}.{secrets.token_hex(4)}")
+    fd = create_file(tmp)
+    try:
+        if binary:
+            handle: IO[Any] = os.fdopen(fd, "wb")
+        else:
+            handle = os.fdopen(fd, "w", encoding="utf-8", newline=newline)
+    except BaseException:
+        os.close(fd)
+        tmp.unlink(missing_ok=True)
+        raise
+    try:
+        with handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_writer`)."""
+    with atomic_writer(path, binary=True) as handle:
+        handle.write(data)
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically (see :func:`atomic_writer`)."""
+    with atomic_writer(path) as handle:
+        handle.write(text)
+
+
+@contextlib.contextmanager
+def interrupts_deferred() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) and SIGTERM back while the block runs, then deliver them.
+
+    For short steps that must not be cut in half (moving a finished report into place). Only
+    the main thread can install signal handlers; elsewhere the block runs unprotected.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+
+    def hold(signum: int, frame: object) -> None:
+        received.append(signum)
+
+    previous: dict[int, object] = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        current = signal.getsignal(sig)
+        if current is None:  # installed outside Python: leave it alone
+            continue
+        previous[sig] = current
+        signal.signal(sig, hold)
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)  # type: ignore[arg-type]
+        if received:
+            signal.raise_signal(received[0])
