@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from app.params_file import load_params_file
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
@@ -32,44 +33,54 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
     )
 
 
+_MAP_OPTIONS: tuple[tuple[str, str, str], ...] = (
+    ("alpha", "--alpha", "translation weight, >= 0"),
+    ("beta", "--beta", "rotation weight, >= 0"),
+    ("delta", "--delta", "field threshold, > 1"),
+    ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
+    ("t_total", "--t-total", "cluster total-time threshold (s), > 0"),
+)
+
+
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``."""
+    """The paper's map parameters and ``--params FILE[#ENTRY]``.
+
+    ``--alpha --beta --delta --t-interval --t-total``; ``--params`` gives every map parameter
+    from a JSON file (e.g. a sweep's best.json).
+    """
     d = MapParams()
+    for name, flag, meaning in _MAP_OPTIONS:
+        parser.add_argument(
+            flag,
+            dest=name,
+            type=float,
+            default=None,
+            help=f"{meaning} (default {getattr(d, name):g}, or the --params file's)",
+        )
     parser.add_argument(
-        "--alpha",
-        type=float,
-        default=d.alpha,
-        help=f"translation weight >= 0 (default {d.alpha:g})",
-    )
-    parser.add_argument(
-        "--beta", type=float, default=d.beta, help=f"rotation weight, >= 0 (default {d.beta:g})"
-    )
-    parser.add_argument(
-        "--delta", type=float, default=d.delta, help=f"field threshold, > 1 (default {d.delta:g})"
-    )
-    parser.add_argument(
-        "--t-interval",
-        type=float,
-        default=d.t_interval,
-        help=f"cluster interval threshold (s), > 0 (default {d.t_interval:g})",
-    )
-    parser.add_argument(
-        "--t-total",
-        type=float,
-        default=d.t_total,
-        help=f"cluster total-time threshold (s), > 0 (default {d.t_total:g})",
+        "--params",
+        dest="params_file",
+        default=None,
+        metavar="FILE[#ENTRY]",
+        help="start from the map parameters in a JSON file: {name: value, ...} or a sweep's "
+        "best.json (its smallest_complete setting; #front_ate/0, #paper, ... pick another); "
+        "options given beside it override it",
     )
 
 
 def params_from_args(args: argparse.Namespace) -> MapParams:
-    """Map parameters from the command line (out-of-range values name the valid range)."""
-    return MapParams(
-        alpha=args.alpha,
-        beta=args.beta,
-        delta=args.delta,
-        t_interval=args.t_interval,
-        t_total=args.t_total,
-    )
+    """Map parameters from the command line (out-of-range values name the valid range).
+
+    The ``--params`` file (if any) first, then every option given explicitly.
+    """
+    file = getattr(args, "params_file", None)
+    base = load_params_file(file) if file else MapParams()
+    changes = {
+        name: getattr(args, name)
+        for name, _, _ in _MAP_OPTIONS
+        if getattr(args, name, None) is not None
+    }
+    return base.with_changes(**changes)
 
 
 def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:
