@@ -25,7 +25,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import hashlib
-import importlib.util
 import io
 import json
 import logging
@@ -37,6 +36,7 @@ import sys
 import tempfile
 import threading
 import time
+import urllib.request
 from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -699,6 +699,16 @@ def _import_distributed() -> Any:
     return distributed
 
 
+def dashboard_link(client: Any) -> str | None:
+    """The scheduler's dashboard URL when it answers (it needs bokeh there), else ``None``."""
+    try:
+        link = client.dashboard_link
+        with urllib.request.urlopen(link, timeout=2) as response:  # noqa: S310 - http(s) only
+            return str(link) if response.status == 200 else None
+    except (OSError, ValueError, KeyError):
+        return None
+
+
 def connect_local(workers: int | None = None, processes: bool = True) -> DaskConnection:
     """A local Dask cluster: ``workers`` single-threaded workers (default: one per core).
 
@@ -714,19 +724,23 @@ def connect_local(workers: int | None = None, processes: bool = True) -> DaskCon
     previous = None
     if processes and threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    import dask
+
     try:
-        cluster = distributed.LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=processes,
-            dashboard_address=":0",
-            silence_logs=logging.CRITICAL,  # workers stopped by Ctrl-C log no shutdown noise
-        )
+        with dask.config.set({"distributed.worker.profile.enabled": False}):
+            cluster = distributed.LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=processes,
+                dashboard_address=":0",
+                silence_logs=logging.CRITICAL,  # workers stopped by Ctrl-C log no shutdown noise
+            )
     finally:
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
     client = distributed.Client(cluster)
-    dashboard = client.dashboard_link if importlib.util.find_spec("bokeh") else None
+    client.run(worker_check)  # workers import cogmap now, not in their first cell
+    dashboard = dashboard_link(client)
     kind = "processes" if processes else "threads"
     return DaskConnection(
         client, cluster, f"local Dask cluster, {n} worker {kind} x 1 thread", dashboard
@@ -765,8 +779,7 @@ def connect_remote(scheduler: str, timeout: float = 10.0) -> DaskConnection:
                     f"worker {address} runs cogmap {report['cogmap']}, this is {__version__}; "
                     "install the same version on every worker"
                 )
-        services = client.scheduler_info().get("services", {})
-        connection.dashboard = client.dashboard_link if "dashboard" in services else None
+        connection.dashboard = dashboard_link(client)
         connection.description = f"Dask scheduler {scheduler}, {len(reports)} workers"
     except BaseException:
         connection.close()
@@ -991,7 +1004,7 @@ class Sweep:
         if connection.dashboard:
             self.say(f"Dask dashboard: {connection.dashboard}")
         elif connection.cluster is not None:
-            self.say("Dask dashboard: off (pip install 'dask[diagnostics]' to get one)")
+            self.say("Dask dashboard: off (pip install bokeh to get one)")
 
     @contextlib.contextmanager
     def _locked_folder(self) -> Iterator[None]:
