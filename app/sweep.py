@@ -30,7 +30,6 @@ import json
 import logging
 import math
 import os
-import shutil
 import signal
 import sys
 import tempfile
@@ -306,11 +305,7 @@ def prepare_events(
         save_event_file(target, recording)
         with contextlib.suppress(OSError):  # the cache is a convenience
             shared_events_dir().mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(target, shared_events_dir() / f".{source.events_name}.tmp")
-            os.replace(
-                shared_events_dir() / f".{source.events_name}.tmp",
-                shared_events_dir() / source.events_name,
-            )
+            _write_atomic(shared_events_dir() / source.events_name, target.read_bytes())
         origin = "front end"
     if recording.ground_truth is None:
         raise SweepError(
@@ -345,7 +340,10 @@ def _record(source: BagSource, progress: FrameProgress | None) -> EventRecording
                 if progress is not None:
                     progress(frame.index + 1, total, frame.time)
     except CogmapError as exc:
-        raise SweepError(f"{source.path}: {exc}") from None
+        message = str(exc)
+        if str(source.path) not in message:
+            message = f"{source.path}: {message}"
+        raise SweepError(message) from None
     except MemoryError:
         raise SweepError(f"{source.path}: out of memory while running the front end") from None
     except Exception as exc:  # a damaged bag can fail in many ways; name the bag

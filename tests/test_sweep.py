@@ -511,7 +511,9 @@ def test_unreachable_scheduler_and_bad_bags(tmp_path: Path, capsys):
     out2 = tmp_path / "sweep2"
     assert main(["sweep", str(garbage), "--out", str(out2), "--delta", "2,3"]) == 2
     line = _error_line(capsys)
-    assert line.startswith(f"cogmap sweep: error: {garbage}: ")
+    assert line == (
+        f"cogmap sweep: error: {garbage} has a damaged bag header; it is corrupt, copy it again"
+    )
     assert json.loads((out2 / "sweep.json").read_text())["status"] == "failed"
     assert _read_rows(out2 / "results.csv") == []  # no cell was run
 
