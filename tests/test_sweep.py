@@ -375,6 +375,22 @@ def test_a_failing_cell_is_recorded_and_the_sweep_goes_on(tmp_path: Path, in_pro
     assert json.loads((out / "sweep.json").read_text())["status"] == "incomplete"
 
 
+def test_workers_can_read_the_events_from_the_folder(tmp_path: Path, in_process_client):
+    from app.sweep import check_worker_paths
+
+    source = bag_source(RECORDED, None, BagTopics())
+    options = SweepOptions(spec=sweep_spec({"delta": "3,6"}), ship_events=False)
+    result = Sweep([source], tmp_path / "sweep", options, client=in_process_client).run()
+    assert (result.computed, result.failed) == (3, 0)
+    missing = tmp_path / "elsewhere" / "x.events.npz"
+    with pytest.raises(SweepError) as info:
+        check_worker_paths(in_process_client, [str(missing)])
+    assert str(info.value).endswith(
+        f"cannot read {missing}; put the sweep folder on a path every worker shares, or ship "
+        "the events (--worker-events ship)"
+    )
+
+
 # --------------------------------------------------------------------------- the command
 def _error_line(capsys: pytest.CaptureFixture[str]) -> str:
     err = capsys.readouterr().err
