@@ -709,13 +709,15 @@ QUIET_WORKERS: dict[str, Any] = {
 
 
 def dashboard_link(client: Any) -> str | None:
-    """The scheduler's dashboard URL when it answers (it needs bokeh there), else ``None``."""
+    """The scheduler's dashboard URL when it serves one (it needs bokeh there), else ``None``."""
     try:
         link = client.dashboard_link
         with urllib.request.urlopen(link, timeout=2) as response:  # noqa: S310 - http(s) only
-            return str(link) if response.status == 200 else None
+            page = response.read(4096)
+            ok = response.status == 200 and b"needs bokeh" not in page
     except (OSError, ValueError, KeyError):
         return None
+    return str(link) if ok else None
 
 
 def connect_local(workers: int | None = None, processes: bool = True) -> DaskConnection:
