@@ -179,12 +179,12 @@ def _sweep(args: argparse.Namespace) -> int:
         progress.close()
         for bar in bars:
             bar.close()
-    print(summary_text(result, spec))
+    print(summary_text(result))
     return 0
 
 
 def _setting(entry: dict[str, Any], swept: list[str]) -> str:
-    return " ".join(f"{name}={entry['params'][name]:.6g}" for name in swept)
+    return " ".join(f"{name}={entry['params'][name]:.4g}" for name in swept)
 
 
 def _figures(entry: dict[str, Any]) -> str:
@@ -192,37 +192,40 @@ def _figures(entry: dict[str, Any]) -> str:
         return "-" if value is None else format(value, spec)
 
     return (
-        f"{entry['vertices']:7.1f} vertices, ATE {fmt(entry['ate_m'], '.4f')} m, completeness "
+        f"{entry['vertices']:5.0f} vertices, ATE {fmt(entry['ate_m'], '.4f')} m, completeness "
         f"{fmt(entry['completeness'], '.4f')}, correctness {fmt(entry['correctness'], '.4f')}"
     )
 
 
-def summary_text(result: SweepResult, spec: SweepSpec) -> str:
+def summary_text(result: SweepResult) -> str:
     """What a finished sweep found: the paper's setting, the smallest complete map, the front."""
     best = result.best
     swept = list(best["swept"])
+    paper = best.get("paper")
+    smallest = best.get("smallest_complete")
+    front = best["front_ate"]
+    shown = front if len(front) <= 12 else front[:6] + front[-6:]
+    entries = [e for e in [paper, smallest, *shown] if e]
+    width = max([len(_setting(e, swept)) for e in entries] + [10])
+    label = f"smallest, compl >= {best['min_completeness']:g}"
+    pad = max(len(label), 8)
     lines = [
         f"{result.cells} cells: {result.computed} computed now, {result.skipped} from earlier "
         f"runs ({best['map']} map, {best['settings']} settings of {' x '.join(swept)}"
         + ("" if best["paper_in_grid"] else " and the paper's")
         + ")"
     ]
-    paper = best.get("paper")
     if paper:
-        lines.append(f"{'paper':24} {_setting(paper, swept):32} {_figures(paper)}")
-    smallest = best.get("smallest_complete")
-    label = f"smallest, compl >= {best['min_completeness']:g}"
+        lines.append(f"{'paper':{pad}}  {_setting(paper, swept):{width}}  {_figures(paper)}")
     if smallest:
-        lines.append(f"{label:24} {_setting(smallest, swept):32} {_figures(smallest)}")
+        lines.append(f"{label:{pad}}  {_setting(smallest, swept):{width}}  {_figures(smallest)}")
     else:
-        lines.append(f"{label:24} none reaches it")
-    front = best["front_ate"]
+        lines.append(f"{label:{pad}}  none reaches it")
     lines.append(f"Pareto front, vertices vs ATE ({len(front)} settings):")
-    shown = front if len(front) <= 12 else front[:6] + front[-6:]
     for k, entry in enumerate(shown):
         if len(front) > 12 and k == 6:
-            lines.append(f"  ... {len(front) - 12} more in best.json")
-        lines.append(f"{'':24} {_setting(entry, swept):32} {_figures(entry)}")
+            lines.append(f"{'':{pad}}  ... {len(front) - 12} more in best.json")
+        lines.append(f"{'':{pad}}  {_setting(entry, swept):{width}}  {_figures(entry)}")
     beat = best["beat_paper"]
     lines.append(
         f"{len(beat)} settings have fewer vertices than the paper's and no worse ATE, "
