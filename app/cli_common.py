@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from app.params_file import load_params_file
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
@@ -33,7 +34,7 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
 
 
 _MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
-    ("alpha", "--alpha", "translation weight >= 0"),
+    ("alpha", "--alpha", "translation weight, >= 0"),
     ("beta", "--beta", "rotation weight, >= 0"),
     ("delta", "--delta", "field threshold, > 1"),
     ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
@@ -43,16 +44,30 @@ _PAPER_FLAGS = tuple(name for name, _, _ in _MAP_ARGUMENTS)
 
 
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters as flags, every other one with ``--param NAME=VALUE``.
+    """The paper's map parameters as flags, ``--params FILE[#ENTRY]``, ``--param NAME=VALUE``.
 
-    Unset ones stay unset (see :func:`map_changes_from_args`): a resumed session keeps its own
-    values for them.
+    ``--params`` gives every map parameter from a JSON file (e.g. a sweep's best.json); the flags
+    and ``--param`` override it. Unset ones stay unset (see :func:`map_changes_from_args`): a
+    resumed session keeps its own values for them.
     """
     d = MapParams()
     for name, flag, meaning in _MAP_ARGUMENTS:
         parser.add_argument(
-            flag, type=float, default=None, help=f"{meaning} (default {getattr(d, name):g})"
+            flag,
+            dest=name,
+            type=float,
+            default=None,
+            help=f"{meaning} (default {getattr(d, name):g}, or the --params file's)",
         )
+    parser.add_argument(
+        "--params",
+        dest="params_file",
+        default=None,
+        metavar="FILE[#ENTRY]",
+        help="start from the map parameters in a JSON file: {name: value, ...} or a sweep's "
+        "best.json (its smallest_complete setting; #front_ate/0, #paper, ... pick another); "
+        "options given beside it override it",
+    )
     parser.add_argument(
         "--param",
         action="append",
@@ -64,8 +79,13 @@ def add_map_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
-    """The map parameters given on the command line (name -> value), validated."""
-    changes: dict[str, float] = {
+    """The map parameters given on the command line (name -> value), validated.
+
+    Every parameter of a ``--params`` file, then the flags and ``--param`` values over it.
+    """
+    file = getattr(args, "params_file", None)
+    changes: dict[str, float] = load_params_file(file).to_dict() if file else {}
+    changes |= {
         name: getattr(args, name)
         for name, _, _ in _MAP_ARGUMENTS
         if getattr(args, name, None) is not None
@@ -86,7 +106,10 @@ def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
 
 
 def params_from_args(args: argparse.Namespace) -> MapParams:
-    """Map parameters from the command line (out-of-range values name the valid range)."""
+    """Map parameters from the command line (out-of-range values name the valid range).
+
+    The ``--params`` file (if any) first, then every option given explicitly.
+    """
     return MapParams().with_changes(**map_changes_from_args(args))
 
 
