@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from app.params_file import load_params_changes
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
@@ -35,7 +36,7 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
 
 
 _MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
-    ("alpha", "--alpha", "translation weight >= 0"),
+    ("alpha", "--alpha", "translation weight, >= 0"),
     ("beta", "--beta", "rotation weight, >= 0"),
     ("delta", "--delta", "field threshold, > 1"),
     ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
@@ -45,18 +46,34 @@ _PAPER_FLAGS = tuple(name for name, _, _ in _MAP_ARGUMENTS)
 
 
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters as flags, every other one with ``--param NAME=VALUE``.
+    """The paper's map parameters as flags, ``--params FILE[#ENTRY]``, ``--param NAME=VALUE``.
 
-    Unset ones stay unset (see :func:`map_changes_from_args`): they keep the default of the
-    input's kind (the paper's for bags,
-    :data:`~cogmap_core.sources.odometry_log.LOG_MAP_PARAMS` for logs), and a resumed session
-    keeps its own values for them.
+    ``--params`` gives map parameters from a JSON file (e.g. a sweep's best.json, which names
+    every one); the flags and ``--param`` override it. Unset ones stay unset (see
+    :func:`map_changes_from_args`): they keep the default of the input's kind (the paper's for
+    bags, :data:`~cogmap_core.sources.odometry_log.LOG_MAP_PARAMS` for logs), and a resumed
+    session keeps its own values for them.
     """
     paper, log = MapParams(), LOG_MAP_PARAMS
     for name, flag, meaning in _MAP_ARGUMENTS:
         a, b = getattr(paper, name), getattr(log, name)
         default = f"default {a:g}" if a == b else f"default {a:g}; {b:g} for logs"
-        parser.add_argument(flag, type=float, default=None, help=f"{meaning} ({default})")
+        parser.add_argument(
+            flag,
+            dest=name,
+            type=float,
+            default=None,
+            help=f"{meaning} ({default}; or the --params file's)",
+        )
+    parser.add_argument(
+        "--params",
+        dest="params_file",
+        default=None,
+        metavar="FILE[#ENTRY]",
+        help="start from the map parameters in a JSON file: {name: value, ...} or a sweep's "
+        "best.json (its smallest_complete setting; #front_ate/0, #paper, ... pick another); "
+        "options given beside it override it",
+    )
     parser.add_argument(
         "--param",
         action="append",
@@ -69,8 +86,14 @@ def add_map_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
-    """The map parameters given on the command line (name -> value), validated."""
-    changes: dict[str, float] = {
+    """The map parameters given on the command line (name -> value), validated.
+
+    Every parameter a ``--params`` file names (a sweep's best.json names all), then the flags and
+    ``--param`` values over it.
+    """
+    file = getattr(args, "params_file", None)
+    changes: dict[str, float] = load_params_changes(file) if file else {}
+    changes |= {
         name: getattr(args, name)
         for name, _, _ in _MAP_ARGUMENTS
         if getattr(args, name, None) is not None
@@ -187,11 +210,16 @@ def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
         raise ParameterError(f"--frontend: {exc}") from None
 
 
-def resolve_bag(bag: str | None) -> Path:
-    """The bag to use: the given path, or the built-in default dataset (generated on first use)."""
+def resolve_bag(bag: str | None, logs: bool = True) -> Path:
+    """The input to use: the given path, or the built-in default dataset (generated on first use).
+
+    ``logs``: the command also takes logs of odometry and place recognition (named in the error).
+    """
     if bag is not None:
         path = Path(bag)
         if not path.exists():
+            if not logs:
+                raise InputFileError(f"{path}: no such bag; give an existing .bag file or omit BAG")
             raise InputFileError(
                 f"{path}: no such file; give an existing bag or log file, or omit it"
             )

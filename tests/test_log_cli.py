@@ -122,6 +122,13 @@ def test_param_options_override_the_log_defaults(square_log: Path, tmp_path: Pat
     expected = LOG_MAP_PARAMS.with_changes(integration_radius=0.3, beta=12.0)
     assert config["map"] == expected.to_dict()
     assert config["map"]["alpha"] == LOG_MAP_PARAMS.alpha  # still the log's default
+    # a --params table: the parameters it names, the log's defaults for the others
+    table = tmp_path / "p.json"
+    table.write_text('{"delta": 4.5, "t_total": 80}')
+    again = tmp_path / "again"
+    assert main(["run", str(square_log), "--out", str(again), "--params", str(table)]) == 0
+    config = json.loads((again / "config.json").read_text())
+    assert config["map"] == LOG_MAP_PARAMS.with_changes(delta=4.5, t_total=80.0).to_dict()
 
 
 def test_a_log_report_is_staged_like_a_bag_report(square_log: Path, tmp_path: Path) -> None:
