@@ -151,7 +151,7 @@ def _sweep(args: argparse.Namespace) -> int:
         )
     topics = topics_from_args(args)
     frontend_from_args(args, Path("-"))  # validate --frontend overrides now
-    paths = [resolve_bag(b) for b in args.bags] if args.bags else [resolve_bag(None)]
+    paths = [resolve_bag(b, logs=False) for b in args.bags] if args.bags else [resolve_bag(None)]
     sources = []
     for path in paths:
         frontend = None if path.suffix == ".npz" else frontend_from_args(args, path)

@@ -3,7 +3,7 @@
 ``cogmap serve --params FILE`` (and ``cogmap run``) start from the parameters in ``FILE``:
 
 - a flat table, ``{"delta": 5.0, "t_interval": 1.5}`` (parameters not named keep their
-  defaults), or ``{"params": {...}}``;
+  defaults: the input kind's, the paper's for bags), or ``{"params": {...}}``;
 - a sweep's ``best.json``: its ``smallest_complete`` entry by default, or another entry named
   after ``#``: ``best.json#paper``, ``best.json#front_ate/0`` (the first, smallest, setting of
   the vertices-vs-ATE front), ``best.json#front_completeness/2``, ``best.json#beat_paper/0``.
@@ -31,7 +31,17 @@ def split_entry(text: str) -> tuple[Path, str | None]:
 
 
 def load_params_file(text: str) -> MapParams:
-    """The map parameters in ``FILE`` or ``FILE#ENTRY`` (see the module docstring).
+    """The map parameters in ``FILE`` or ``FILE#ENTRY``, the paper's where it names none.
+
+    Raises:
+        InputFileError: see :func:`load_params_changes`.
+
+    """
+    return MapParams().with_changes(**load_params_changes(text))
+
+
+def load_params_changes(text: str) -> dict[str, float]:
+    """The map parameters ``FILE`` or ``FILE#ENTRY`` names (see the module docstring), validated.
 
     Raises:
         InputFileError: missing or unreadable file, not JSON, an unknown entry or an empty one,
@@ -57,11 +67,12 @@ def load_params_file(text: str) -> MapParams:
     if not isinstance(values, dict):
         raise InputFileError(f"{path}: 'params' must be an object of parameter: value")
     try:
-        return MapParams.from_dict(values)
+        MapParams.from_dict(values)  # unknown names and out-of-range values
     except CogmapError as exc:
         raise InputFileError(f"{path}: {exc}") from None
     except TypeError as exc:  # a value of the wrong type
         raise InputFileError(f"{path}: {exc}") from None
+    return dict(values)
 
 
 def _best_entry(path: Path, best: dict[str, Any], entry: str) -> dict[str, Any]:

@@ -429,7 +429,9 @@ class CognitiveMap:
     def _relocalised(self, target: int, to_place: tuple[float, float, float], t: float) -> None:
         """An accepted relocalisation: a revisit run may close (and be integrated) here."""
         if self._integrates:
-            merged = self.integration.on_relocalised(self.graph, target, to_place, t, self.params)
+            merged = self.integration.on_relocalised(
+                self.graph, target, to_place, t, self.params, self._current
+            )
             if merged:
                 self.counters.integrated += merged
                 self._follow_merges()

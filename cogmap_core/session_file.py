@@ -24,7 +24,9 @@ JSON (as Python writes it; ``NaN`` and ``Infinity`` may occur)::
 ``frontend.templates`` (uint8 ``(T, Y, X)``), ``frontend.pose_cells``, ``log.kind``,
 ``map.compact.graph.pose`` or ``map.compact.adjacency.neighbour``; ``header["arrays"]`` lists
 them all with shape and dtype, and a file whose members do not match it is refused. Files are
-written to a temporary name beside the target and renamed when complete.
+written to a temporary name beside the target and renamed when complete. ``log.score`` (each
+link's place-recognition score, NaN where none) may be absent: files written before it existed
+load with no scores.
 """
 
 from __future__ import annotations
@@ -257,6 +259,9 @@ def _save_map(cmap: CognitiveMap, prefix: str, arrays: Arrays) -> Json:
         "integration": {
             "open": None if integration.open is None else _run_json(integration.open),
             "pending": [_run_json(run) for run in integration.pending],
+            "relocalised_at": None
+            if integration._relocalised_at is None
+            else list(integration._relocalised_at),
             "known_edges": None
             if known is None
             else {"reach": known.reach, "radius": known.radius, "tree": known.tree is not None},
@@ -436,6 +441,8 @@ def _load_log(arrays: Arrays) -> EventLog:
     columns = {
         name: arrays[f"log.{name}"] for name in ("kind", "time", "ref", "view", "value0", "value1")
     }
+    if "log.score" in arrays:  # links' place-recognition scores (absent from older files)
+        columns["score"] = arrays["log.score"]
     frame_end = arrays["log.frame_end"]
     if frame_end.size and frame_end[-1] != columns["kind"].shape[0]:
         raise SessionError("the frame table does not match the events")
@@ -504,6 +511,8 @@ def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
     si = s["integration"]
     integration.open = None if si["open"] is None else _run_from_json(si["open"])
     integration.pending = [_run_from_json(r) for r in si["pending"]]
+    at = si.get("relocalised_at")  # absent from files of before it existed: no pending one
+    integration._relocalised_at = None if at is None else (int(at[0]), int(at[1]))
     if si["known_edges"] is not None:
         known = KnownEdges.__new__(KnownEdges)
         for name in ("start", "end", "ends", "newest"):

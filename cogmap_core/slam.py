@@ -4,6 +4,11 @@ The front end (view templates, pose cells) is the expensive, parameter-independe
 events depend only on the data. The session keeps them, so the maps can be rebuilt for other
 map parameters (alpha, beta, delta, T_interval, T_total, ...) up to any frame without touching
 the bag again -- what the web app's sliders do. No I/O happens here.
+
+A session takes camera :class:`~cogmap_core.frames.Frame` objects (run through the RatSLAM front
+end) or :class:`~cogmap_core.frames.EventStep` objects whose events are already known (a log of
+odometry and place recognition, :mod:`cogmap_core.sources.odometry_log`); both are logged the
+same way, one "frame" per item.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
     TRUE_LOOP_CLOSURE_DISTANCE,
     TRUE_LOOP_CLOSURE_HEADING,
+    EvaluationSettings,
     LayoutFidelity,
     LoopClosureScore,
     SizeChange,
@@ -42,12 +48,15 @@ from cogmap_core.event_file import (
     events_to_columns,
 )
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
-from cogmap_core.frames import Frame
+from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 
 FloatArray = NDArray[np.float64]
 ALL_MODES: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 _EVENT_COLUMNS = ("kind", "time", "ref", "view", "value0", "value1")
+_LOG_COLUMNS = (*_EVENT_COLUMNS, "score")
+"""The log's per-event columns: the event file's, plus ``score`` (a link's place-recognition
+score; NaN for other events and for links without one)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,9 +120,10 @@ class EventView(Sequence[MapEvent]):
 class EventLog:
     """Front-end events of every frame processed so far, with the ground truth per frame.
 
-    Everything is kept in column arrays grown by doubling (about 41 bytes per event and 33 per
-    frame), in the layout of :mod:`cogmap_core.event_file`: a long run costs a few megabytes, not
-    a Python object per event. :attr:`events` gives them back as event objects.
+    Everything is kept in column arrays grown by doubling (about 49 bytes per event and 33 per
+    frame), in the layout of :mod:`cogmap_core.event_file` plus a ``score`` column (each link's
+    place-recognition score, NaN where there is none): a long run costs a few megabytes, not a
+    Python object per event. :attr:`events` gives them back as event objects.
     """
 
     def __init__(self) -> None:
@@ -128,6 +138,7 @@ class EventLog:
         self._view = np.zeros(cap, dtype=np.int64)
         self._value0 = np.zeros(cap)
         self._value1 = np.zeros(cap)
+        self._score = np.full(cap, np.nan)
         self._frame_end = np.zeros(cap, dtype=np.int64)
         self._frame_time = np.zeros(cap)
         self._truth = np.zeros((cap, 3))
@@ -145,8 +156,9 @@ class EventLog:
     ) -> EventLog:
         """A log holding event columns (as :func:`~cogmap_core.event_file.events_to_columns`).
 
-        ``ground_truth`` is ``(F, 3)``; ``has_truth`` marks the frames that have it (default:
-        all when ``ground_truth`` is given).
+        ``columns`` may hold a ``score`` column (per event; NaN: none); without it no link has a
+        score. ``ground_truth`` is ``(F, 3)``; ``has_truth`` marks the frames that have it
+        (default: all when ``ground_truth`` is given).
         """
         log = cls()
         n = int(np.asarray(columns["kind"]).shape[0])
@@ -155,6 +167,8 @@ class EventLog:
         log._reserve_frames(f)
         for name in _EVENT_COLUMNS:
             getattr(log, "_" + name)[:n] = np.asarray(columns[name])
+        if "score" in columns:
+            log._score[:n] = np.asarray(columns["score"], dtype=np.float64)
         log._frame_end[:f] = np.asarray(frame_end, dtype=np.int64)
         log._frame_time[:f] = np.asarray(frame_time, dtype=np.float64)
         if ground_truth is not None:
@@ -170,12 +184,19 @@ class EventLog:
         events: Sequence[MapEvent],
         time: float,
         ground_truth: tuple[float, float, float] | None = None,
+        link_scores: Sequence[float | None] = (),
     ) -> None:
-        """Log one frame: its events, its data time and (when known) its true pose."""
+        """Log one frame: its events, its data time and (when known) its true pose.
+
+        ``link_scores``: the place-recognition score of each link in ``events``, in order (links
+        beyond them, or given None, have none).
+        """
         n = self._n_events
         self._reserve_events(n + len(events))
         kind, ref, view = self._kind, self._ref, self._view
         value0, value1 = self._value0, self._value1
+        self._score[n : n + len(events)] = np.nan
+        link = 0
         for k, event in enumerate(events, n):
             self._time[k] = event.time
             cls = type(event)
@@ -189,6 +210,10 @@ class EventLog:
                 kind[k] = KIND_LINK if cls is LinkToVertex else KIND_SET
                 ref[k], view[k] = event.target, -1  # type: ignore[union-attr]
                 value0[k], value1[k] = event.relative_rad, 0.0  # type: ignore[union-attr]
+                if cls is LinkToVertex:
+                    if link < len(link_scores) and link_scores[link] is not None:
+                        self._score[k] = link_scores[link]
+                    link += 1
             else:
                 raise TypeError(f"not a map event: {event!r}")
         self._n_events = n + len(events)
@@ -206,7 +231,7 @@ class EventLog:
         cap = self._kind.shape[0]
         if n > cap:
             new = max(n, 2 * cap)
-            for name in _EVENT_COLUMNS:
+            for name in _LOG_COLUMNS:
                 setattr(self, "_" + name, _grown(getattr(self, "_" + name), new))
 
     def _reserve_frames(self, n: int) -> None:
@@ -277,10 +302,30 @@ class EventLog:
         known = self._has_truth[frame].tolist()
         return [tuple(t) if ok else None for t, ok in zip(truth, known, strict=True)]  # type: ignore[misc]
 
+    @property
+    def link_scores(self) -> list[float | None]:
+        """Per loop closure (link event), its place-recognition score (None where unknown)."""
+        n = self._n_events
+        scores = self._score[:n][self._kind[:n] == KIND_LINK].tolist()
+        return [None if s != s else s for s in scores]  # NaN: no score
+
+    def link_score(self, k: int) -> float | None:
+        """Place-recognition score of link ``k`` of :meth:`link_table` (None when unknown)."""
+        n = self._n_events
+        links = np.flatnonzero(self._kind[:n] == KIND_LINK)
+        if not 0 <= k < links.size:
+            return None
+        score = float(self._score[links[k]])
+        return None if np.isnan(score) else score
+
     def columns(self, stop: int | None = None) -> dict[str, NDArray[Any]]:
-        """The event columns of the first ``stop`` events (default all), as read-only views."""
+        """The columns of the first ``stop`` events (default all), as read-only views.
+
+        The event file's (``kind``, ``time``, ``ref``, ``view``, ``value0``, ``value1``) and
+        ``score`` (each link's place-recognition score; NaN: none).
+        """
         stop = self._n_events if stop is None else max(0, min(stop, self._n_events))
-        return {name: _read_only(getattr(self, "_" + name)[:stop]) for name in _EVENT_COLUMNS}
+        return {name: _read_only(getattr(self, "_" + name)[:stop]) for name in _LOG_COLUMNS}
 
     def events_between(self, start: int, stop: int) -> list[MapEvent]:
         """Events ``start .. stop - 1`` as event objects."""
@@ -399,14 +444,14 @@ class EventLog:
     def loop_closure_score(
         self,
         distance: float = TRUE_LOOP_CLOSURE_DISTANCE,
-        heading: float = TRUE_LOOP_CLOSURE_HEADING,
+        heading: float | None = TRUE_LOOP_CLOSURE_HEADING,
     ) -> LoopClosureScore | None:
         """Front-end loop closures judged by ground truth, position and heading.
 
         A link is true when the robot's true position is within ``distance`` of the target
         vertex's true position (at its creation) and the heading the link claims (target heading
-        plus the link's relative angle) is within ``heading`` of the robot's true heading.
-        ``false_indices`` index :meth:`link_table`.
+        plus the link's relative angle) is within ``heading`` of the robot's true heading
+        (``heading=None``: position only). ``false_indices`` index :meth:`link_table`.
         """
         if not self.has_ground_truth():
             return None
@@ -427,6 +472,8 @@ class EventLog:
         if not robot.shape[0]:
             return score_loop_closures(np.zeros((0, 3)), np.zeros((0, 3)))
         target_truth = self.truth_at(target_time)
+        if heading is None:
+            return score_loop_closures(robot, target_truth, None, distance)
         return score_loop_closures(robot, target_truth, relative, distance, heading)
 
     def recording(self, source: str = "", frontend: dict[str, Any] | None = None) -> EventRecording:
@@ -471,24 +518,34 @@ class SlamSession:
         params: MapParams | None = None,
         frontend_config: FrontEndConfig | None = None,
         modes: tuple[MapMode, ...] = ALL_MODES,
+        evaluation: EvaluationSettings | None = None,
     ) -> None:
-        """Start an empty session."""
+        """Start an empty session (``evaluation``: tolerances of the accuracy figures)."""
         self.params = params or MapParams()
         self.frontend = FrontEnd(frontend_config)
         self.modes = modes
         self.maps = MapSet(self.params, modes)
         self.log = EventLog()
         self.finished = False
+        self.evaluation = evaluation or EvaluationSettings()
 
     # ------------------------------------------------------------------ processing
-    def process(self, frame: Frame) -> FrameOutput:
-        """Run the front end on one frame and apply its events to every map."""
-        events = self.frontend.process(frame)
+    def process(self, frame: Frame | EventStep) -> FrameOutput:
+        """Log one frame's events (the front end's, or a step's own) and apply them to every map."""
+        if isinstance(frame, EventStep):
+            events: list[MapEvent] = list(frame.events)
+            scores: Sequence[float | None] = frame.link_scores
+            view_template = None
+        else:
+            events = self.frontend.process(frame)
+            scores = ()
+            view_template = self.frontend.current_template
         truth = frame.ground_truth
         self.log.append_frame(
             events,
             frame.time,
             None if truth is None else (float(truth[0]), float(truth[1]), float(truth[2])),
+            scores,
         )
         for event in events:
             self.maps.apply(event)
@@ -496,11 +553,11 @@ class SlamSession:
             index=frame.index,
             time=float(frame.time),
             events=tuple(events),
-            view_template=self.frontend.current_template,
+            view_template=view_template,
             template_count=self.frontend.template_count,
         )
 
-    def run(self, frames: Iterable[Frame]) -> None:
+    def run(self, frames: Iterable[Frame | EventStep]) -> None:
         """Process every frame, then finish."""
         for frame in frames:
             self.process(frame)
@@ -566,8 +623,9 @@ class SlamSession:
         return self.log.layout_fidelity(cmap, radius)
 
     def loop_closure_score(self) -> LoopClosureScore | None:
-        """Front-end loop closures judged by ground truth (position and heading)."""
-        return self.log.loop_closure_score()
+        """Front-end loop closures judged by ground truth, with the session's tolerances."""
+        judging = self.evaluation
+        return self.log.loop_closure_score(judging.loop_distance, judging.loop_heading)
 
 
 def optimisation_summary(cmap: CognitiveMap) -> dict[str, float | int]:

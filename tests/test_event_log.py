@@ -108,3 +108,23 @@ def test_dead_reckoning_per_frame() -> None:
     assert poses[:, 0] == pytest.approx(x, abs=1e-12)
     assert poses[:, 1] == pytest.approx(y, abs=1e-12)
     assert poses[-1, 2] == pytest.approx(h3, abs=1e-12)
+
+
+def test_link_scores_are_a_column() -> None:
+    log = EventLog()
+    log.append_frame([Odometry(0.0, 0.0, 0.0), CreateVertex(0.0, 0, 0)], 0.0)
+    log.append_frame([Odometry(0.1, 0.5, 0.0), CreateVertex(0.1, 1, 1)], 0.1)
+    links = [LinkToVertex(0.2, 0, 0.0), LinkToVertex(0.2, 1, 0.0)]
+    log.append_frame([Odometry(0.2, 0.1, 0.0), *links], 0.2, link_scores=(0.9, 0.85))
+    log.append_frame([LinkToVertex(0.3, 0, 0.0)], 0.3)  # a camera front end's: no score
+    assert log.link_scores == [0.9, 0.85, None]
+    assert [log.link_score(k) for k in range(4)] == [0.9, 0.85, None, None]
+    assert log.truncated(3).link_scores == [0.9, 0.85]
+    score = log.columns()["score"]
+    assert np.isnan(score[:5]).all()  # NaN for events other than links ...
+    assert score[5:7].tolist() == [0.9, 0.85] and np.isnan(score[7])  # ... and links without
+    again = EventLog.from_columns(log.columns(), log.frame_end, log.frame_time)
+    assert again.link_scores == log.link_scores
+    # columns without scores (an event file's) give links without scores
+    columns = {k: v for k, v in log.columns().items() if k != "score"}
+    assert EventLog.from_columns(columns, log.frame_end, log.frame_time).link_scores == [None] * 3

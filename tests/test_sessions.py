@@ -35,7 +35,7 @@ from cogmap_core.session_file import (
     same_state,
     save_session,
 )
-from cogmap_core.slam import SlamSession
+from cogmap_core.slam import EventLog, SlamSession
 from tests.test_server_support import assert_same_map, counter, running_app
 
 # 2 x 2 laps of the figure eight at 8 frames per second: about 2000 frames in all
@@ -195,6 +195,41 @@ def test_session_survives_a_round_trip_mid_run(days: tuple[Path, Path], tmp_path
         loaded.process(frame)
     assert same_state(session, loaded)
     assert [p.name for p in tmp_path.iterdir()] == ["s.npz"]  # no temporary file left
+
+
+def test_session_file_keeps_link_scores_and_link_relocalisation(tmp_path: Path) -> None:
+    """The state a log adds (per-link scores, a run re-localised by a link alone) is saved.
+
+    The CLI refuses sessions for logs; the file still holds every attribute of the state.
+    """
+    from cogmap_core.sources.detect import open_source
+    from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
+    from tests.test_log_cli import square_run
+
+    lines, truth, _ = square_run()
+    (tmp_path / "sq_Input.txt").write_text("\n".join(lines) + "\n")
+    (tmp_path / "sq_GT.txt").write_text("\n".join(truth) + "\n")
+    steps = list(open_source(tmp_path / "sq_Input.txt").frames())
+    session = SlamSession(LOG_MAP_PARAMS)
+    split = None
+    for k, step in enumerate(steps):
+        session.process(step)
+        if any(c.integration._relocalised_at is not None for c in session.maps.maps.values()):
+            split = k + 1
+            break
+    assert split is not None and session.log.link_scores  # links with scores before the split
+    path = save_session(tmp_path / "s.npz", session, SessionMeta())
+    loaded, _ = load_session(path)
+    assert same_state(session, loaded)
+    assert loaded.log.link_scores == session.log.link_scores
+    modes = session.maps.maps
+    assert [loaded.maps[m].integration._relocalised_at for m in modes] == [
+        session.maps[m].integration._relocalised_at for m in modes
+    ]
+    for step in steps[split:]:
+        session.process(step)
+        loaded.process(step)
+    assert same_state(session, loaded)
 
 
 def test_resume_offsets() -> None:
@@ -364,7 +399,23 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "num_edges",
         "num_loop_edges",
     },  # fmt: skip
-    SceneIntegration: {"open", "pending", "_known"},
+    SceneIntegration: {"open", "pending", "_known", "_relocalised_at"},
+    EventLog: {
+        "_n_events",
+        "_n_frames",
+        "_truth_frames",
+        "_kind",
+        "_time",
+        "_ref",
+        "_view",
+        "_value0",
+        "_value1",
+        "_score",
+        "_frame_end",
+        "_frame_time",
+        "_truth",
+        "_has_truth",
+    },  # fmt: skip
     KnownEdges: {"start", "end", "ends", "newest", "tree", "reach", "radius"},
     RelocalisationGate: {"streak", "accepted_by_consensus"},
     FrontEnd: {"config", "local_view", "pose_cells", "last_view", "frames", "_last_time"},
@@ -395,6 +446,7 @@ def test_the_session_format_knows_every_attribute() -> None:
         CognitiveMap: CognitiveMap(MapMode.COMPACT),
         MapGraph: graph,
         SceneIntegration: SceneIntegration(),
+        EventLog: EventLog(),
         KnownEdges: KnownEdges(graph, 0.1),
         RelocalisationGate: RelocalisationGate(),
         FrontEnd: FrontEnd(config),

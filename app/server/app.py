@@ -45,10 +45,12 @@ from cogmap_core.config import MapParams, parameter_range
 from cogmap_core.datasets import BagTopics
 from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.evaluation import LayoutFidelity
+from cogmap_core.event_file import KIND_LINK
 from cogmap_core.events import LinkToVertex
-from cogmap_core.frames import Frame
+from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
-from cogmap_core.slam import SlamSession
+from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.sources.detect import LogOptions
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +66,28 @@ SPEEDS: dict[str, float] = {
     "max": math.inf,
 }
 CHART_POINTS = 400
+RECENT_LINKS = 8
+
+
+def recent_links(log: EventLog, frames: int, count: int) -> list[tuple[float, int, float | None]]:
+    """The last ``count`` links of the first ``frames`` frames: (time, target, score), in order.
+
+    Read from the log's columns (the score is None where the link has none).
+    """
+    end = int(log.frame_end[frames - 1]) if frames else 0
+    if count <= 0 or end <= 0:
+        return []
+    columns = log.columns(end)
+    links = np.flatnonzero(columns["kind"] == KIND_LINK)[-count:]
+    return [
+        (t, r, None if math.isnan(score) else score)
+        for t, r, score in zip(
+            columns["time"][links].tolist(),
+            columns["ref"][links].tolist(),
+            columns["score"][links].tolist(),
+            strict=True,
+        )
+    ]
 
 
 @dataclass(frozen=True, slots=True)
@@ -144,6 +168,10 @@ class CogmapApp:
         scene_hz: maximum map updates per second during playback.
         image_scale: JPEG decode reduction (1, 2, 4, 8).
         topics: the bag's topic names.
+        fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
+        log: how to read a log (ignored for bags).
+        defaults: what "reset" returns to (default: the paper's values; for logs, the
+            defaults of that kind of input).
         resume: a loaded session to show and continue on the bag (see :class:`Replay`); its
             parameters are the sliders' initial values.
 
@@ -161,9 +189,13 @@ class CogmapApp:
         scene_hz: float = 10.0,
         image_scale: int = 4,
         topics: BagTopics | None = None,
+        fmt: str | None = None,
+        log: LogOptions | None = None,
+        defaults: MapParams | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
+        self.defaults = defaults or MapParams()
         for spec in SLIDERS + ADVANCED_SLIDERS:
             _check_spec(spec)
         self.server = server
@@ -193,6 +225,8 @@ class CogmapApp:
             autoplay=autoplay,
             image_scale=image_scale,
             topics=topics,
+            fmt=fmt,
+            log=log,
             resume=resume,
         )
         if resume is not None:
@@ -267,6 +301,7 @@ class CogmapApp:
                 np.zeros((60, 104, 3), dtype=np.uint8), label="camera", format="jpeg"
             )
             self.template_md = gui.add_markdown("view template: –")
+            self.links_html = gui.add_html("")  # logs: the latest links and their scores
             self.counters_html = gui.add_html("")
 
         with gui.add_folder("Map parameters"):
@@ -276,7 +311,8 @@ class CogmapApp:
             with gui.add_folder("Advanced", expand_by_default=False):
                 for spec in ADVANCED_SLIDERS:
                     self._add_param_slider(spec, params)
-            self.reset_button = gui.add_button("reset to paper values", icon=viser.Icon.RESTORE)
+            label = "reset to paper values" if self.defaults == MapParams() else "reset to defaults"
+            self.reset_button = gui.add_button(label, icon=viser.Icon.RESTORE)
             self.params_md = gui.add_markdown("")
         self.reset_button.on_click(lambda _: self.reset_params())
 
@@ -495,17 +531,17 @@ class CogmapApp:
             self.replay.set_params(params)
 
     def reset_params(self) -> None:
-        """Back to the paper's parameter values (one rebuild)."""
-        paper = MapParams()
+        """Back to the default parameter values (the paper's, or the log's; one rebuild)."""
+        defaults = self.defaults
         self._suppress_param_events = True
         try:
             for name, slider in self.param_sliders.items():
-                slider.value = getattr(paper, name)
+                slider.value = getattr(defaults, name)
         finally:
             self._suppress_param_events = False
-        self.params_md.content = "paper values"
-        if self.replay.params != paper:
-            self.replay.set_params(paper)
+        self.params_md.content = "paper values" if defaults == MapParams() else "defaults"
+        if self.replay.params != defaults:
+            self.replay.set_params(defaults)
 
     # ================================================================== listener (worker thread)
     def on_status(self, replay: Replay) -> None:
@@ -513,7 +549,7 @@ class CogmapApp:
         if self._status_limit.due(forced=replay.state is not PlaybackState.PLAYING):
             self._update_status()
 
-    def on_frame(self, replay: Replay, frame: Frame, view_template: int | None) -> None:
+    def on_frame(self, replay: Replay, frame: Frame | EventStep, view_template: int | None) -> None:
         """Show the camera image (rate-limited; the latest one is shown when playback stops)."""
         self._pending_frame = (frame, view_template)
         if self._image_limit.due(not replay.playing):
@@ -525,10 +561,34 @@ class CogmapApp:
             return
         self._pending_frame = None
         frame, view_template = pending
+        if isinstance(frame, EventStep):  # a log: no camera; the latest links' scores instead
+            self._show_links(frame)
+            return
         self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
             f"view template **{template}** · frame {frame.index} · t = {frame.time:.2f} s"
+        )
+
+    def _show_links(self, step: EventStep) -> None:
+        """Hide the camera panel; list the latest place-recognition links with their scores."""
+        if self.camera_image.visible:
+            self.camera_image.visible = False
+        with self.replay.lock:
+            recent = recent_links(self.replay.session.log, self.replay.cursor, RECENT_LINKS)
+        rows = "".join(
+            f"<tr><td>{t:.1f}</td><td>{target}</td><td>{'–' if score is None else f'{score:.3f}'}"
+            "</td></tr>"
+            for t, target, score in reversed(recent)
+        )
+        self.template_md.content = f"step {step.index} · t = {step.time:.2f} s"
+        self.links_html.content = (
+            '<div id="cogmap-links" style="font-size:0.85em"><b>place recognition</b>: latest '
+            "links (score of each)"
+            '<table style="width:100%;font-variant-numeric:tabular-nums">'
+            "<tr><th>t (s)</th><th>to vertex</th><th>score</th></tr>"
+            + (rows or '<tr><td colspan="3">none yet</td></tr>')
+            + "</table></div>"
         )
 
     def on_maps(self, replay: Replay, modes: tuple[MapMode, ...], forced: bool) -> None:
@@ -626,7 +686,8 @@ class CogmapApp:
         modes = self.streamer.shown
         if self._ate_limit.due(forced):
             self._ate = {m: session.ate(session.maps[m]) for m in modes}
-            self._fidelity = {m: session.layout_fidelity(session.maps[m]) for m in modes}
+            radius = session.evaluation.layout_radius  # the input kind's (8 cm for bags)
+            self._fidelity = {m: session.layout_fidelity(session.maps[m], radius) for m in modes}
         t = 0.0 if math.isnan(r.frame_time) else r.frame_time
         rows = [
             ("time", "time", f"{t:.1f} / {r.duration:.1f} s"),
@@ -643,6 +704,7 @@ class CogmapApp:
             self._map_counts(session.maps[m], self._ate.get(m), self._fidelity.get(m))
             for m in modes
         ]
+        radius = f"{session.evaluation.layout_radius * 100:g} cm"
         for key, label in (
             ("vertices", "vertices"),
             ("edges", "edges"),
@@ -650,8 +712,8 @@ class CogmapApp:
             ("clusters", "clusters"),
             ("optimizations", "optimizations"),
             ("ate", "ATE (m)"),
-            ("completeness", "completeness (8 cm)"),
-            ("correctness", "correctness (8 cm)"),
+            ("completeness", f"completeness ({radius})"),
+            ("correctness", f"correctness ({radius})"),
         ):
             per_map.append((key, label, [s[key] for s in stats]))
         body += f"<tr><td></td>{head}</tr>"

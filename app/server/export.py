@@ -15,14 +15,13 @@ import json
 import math
 import socket
 from collections.abc import Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import viser
 
-from app.pipeline import session_summary, write_sizes_csv
+from app.pipeline import read_warnings, session_summary, source_description, write_sizes_csv
 from app.server.scene import SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
@@ -69,7 +68,9 @@ def view_session(replay: Replay) -> SlamSession:
     Call with ``replay.lock`` held.
     """
     source = replay.session
-    view = SlamSession(source.params, replay.frontend_config, source.modes)
+    view = SlamSession(
+        source.params, replay.frontend_config, source.modes, evaluation=source.evaluation
+    )
     view.log = truncated_log(source.log, replay.cursor)
     view.maps.maps = dict(source.maps.maps)
     view.finished = replay.at_end
@@ -83,11 +84,12 @@ def summary_dict(replay: Replay) -> dict[str, object]:
     first = float(times[0]) if len(times) else 0.0
     last = float(times[-1]) if len(times) else 0.0
     warnings: dict[str, object] = {}
+    source: dict[str, object] = {}
     if replay.reader is not None:
-        counters = replay.reader.counters
-        warnings = {k: v for k, v in asdict(counters).items() if k != "frames" and v}
+        warnings = read_warnings(replay.reader)
+        source = source_description(replay.reader)
     dataset = str(replay.bag_path) if replay.bag_path is not None else ""
-    return session_summary(view, dataset, first, last, replay.processing_s, warnings)
+    return session_summary(view, dataset, first, last, replay.processing_s, warnings, source=source)
 
 
 def summary_bytes(replay: Replay) -> bytes:

@@ -1,4 +1,8 @@
-"""The replay worker: one thread that owns the SLAM session and replays the bag through it.
+"""The replay worker: one thread that owns the SLAM session and replays the input through it.
+
+The input is a bag (camera frames through the front end) or a log of odometry and place
+recognition (steps with their events, :mod:`cogmap_core.sources`); it is opened with
+:func:`~cogmap_core.sources.detect.open_source` and replayed the same way.
 
 The worker reads frames at the playback speed and feeds them to a
 :class:`~cogmap_core.slam.SlamSession`. Every other thread (GUI callbacks of any number of clients)
@@ -33,13 +37,14 @@ from typing import Protocol
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagReader, BagTopics, open_bag
+from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError
-from cogmap_core.frames import Frame
+from cogmap_core.errors import CogmapError, ParameterError
+from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, SlamSession
+from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
 
 GenerationProgress = Callable[[int, int], None]
 BagSource = Path | Callable[[GenerationProgress], Path]
@@ -98,8 +103,8 @@ class ReplayListener(Protocol):
     def on_status(self, replay: Replay) -> None:
         """The playback state, message or position changed."""
 
-    def on_frame(self, replay: Replay, frame: Frame, view_template: int | None) -> None:
-        """A frame was replayed (its camera image and matched view template)."""
+    def on_frame(self, replay: Replay, frame: Frame | EventStep, view_template: int | None) -> None:
+        """A frame was replayed (its camera image and matched view template; a log's step)."""
 
     def on_maps(self, replay: Replay, modes: tuple[MapMode, ...], forced: bool) -> None:
         """The maps ``modes`` changed; ``forced``: show it now (not rate-limited)."""
@@ -137,11 +142,11 @@ class _Interrupted(Exception):
 
 
 class Replay:
-    """Replays one bag through a :class:`SlamSession` on a worker thread.
+    """Replays one bag or log through a :class:`SlamSession` on a worker thread.
 
     Args:
-        bag: the bag, or a function that produces it given a progress callback (the built-in
-            dataset, generated on first use).
+        bag: the bag or log, or a function that produces it given a progress callback (the
+            built-in dataset, generated on first use).
         listener: receives updates (on the worker thread).
         params: initial map parameters.
         frontend: front-end configuration, or a function of the bag giving it (default: the
@@ -151,10 +156,12 @@ class Replay:
         speed: playback speed (data seconds per wall second; ``math.inf``: as fast as possible).
         autoplay: start playing as soon as the bag is open.
         priority: maps rebuilt first after a parameter change (the displayed ones).
+        fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
+        log: how to read a log (ignored for bags).
         resume: a saved session and its metadata (:func:`~cogmap_core.session_file.load_session`)
             to continue: its maps are shown at once and grow with the bag's frames, which follow
             the session's data as if the bags were one. Restarting or seeking goes back no
-            further than the session's end.
+            further than the session's end. Bags only: a log with a session is refused.
 
     Times: :attr:`frame_time`, :attr:`duration` and :meth:`seek` are positions in the bag;
     the session's data time of bag time ``t`` is ``t +`` :attr:`time_offset` (0 unless
@@ -174,10 +181,15 @@ class Replay:
         autoplay: bool = True,
         priority: tuple[MapMode, ...] = (MapMode.COMPACT,),
         topics: BagTopics | None = None,
+        fmt: str | None = None,
+        log: LogOptions | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> None:
         """Set up the replay (nothing is read until :meth:`start`)."""
         self.bag_source = bag
+        self.format = fmt
+        self.log_options = log or LogOptions()
+        self.has_camera = True  # known once the input is open
         self.listener = listener
         self.frontend_source = frontend
         self.frontend_config: FrontEndConfig | None = (
@@ -216,7 +228,7 @@ class Replay:
         self.state = PlaybackState.LOADING
         self.message = "opening the bag"
         self.bag_path: Path | None = None
-        self.reader: BagReader | None = None
+        self.reader: Source | None = None
         self.duration = 0.0
         self.total_frames = 0
         # per frame of the bag, the view template it matched (-1: none); 8 bytes a frame
@@ -224,8 +236,8 @@ class Replay:
         self.rebuilds: list[RebuildRecord] = []
         self.frame_time = math.nan  # data time of the last frame applied
         self.processing_s = 0.0  # wall time spent applying frames (front end + maps)
-        self._frames: Iterator[Frame] | None = None
-        self._next: Frame | None = None
+        self._frames: Iterator[Frame | EventStep] | None = None
+        self._next: Frame | EventStep | None = None
         self._anchor: tuple[float, float] | None = None  # (wall, data time)
         self._fast_forward_to: float | None = None
         self._busy = 0  # 1 while the worker handles a request or a frame
@@ -440,10 +452,20 @@ class Replay:
         try:
             path = self._resolve_bag()
             self.bag_path = path
-            reader = open_bag(path, topics=self.topics, image_scale=self.image_scale)
-            if self.session.log.frames == 0:  # the front end is chosen for the bag
-                self._choose_frontend(path)
+            fmt = resolve_format(path, self.format)
+            if self.resume_meta is not None and not KINDS[fmt].has_camera:
+                raise ParameterError(
+                    f"{path} is a log of odometry and place recognition ({fmt}): sessions are "
+                    "for bags; replay it without a session to resume"
+                )
+            reader = open_source(
+                path, fmt, topics=self.topics, image_scale=self.image_scale, log=self.log_options
+            )
+            self.has_camera = KINDS[fmt].has_camera
+            if self.session.log.frames == 0:  # the front end is chosen for the input
+                self._choose_frontend(path, fmt)
             if self.resume_meta is not None and self.base_frames:
+                assert isinstance(reader, BagReader)
                 end = float(self.session.log.frame_time[self.base_frames - 1])
                 self.time_offset = self.resume_meta.resume_offset(reader.start_stamp, end)
         except CogmapError as exc:
@@ -466,9 +488,12 @@ class Replay:
         self._notify_status()
         self._notify_maps(ALL_MODES, True)
 
-    def _choose_frontend(self, path: Path) -> None:
+    def _choose_frontend(self, path: Path, fmt: str) -> None:
+        kind = KINDS[fmt]
         source = self.frontend_source
-        if isinstance(source, FrontEndConfig):
+        if not kind.has_camera:
+            config = None  # a log's events need no front end
+        elif isinstance(source, FrontEndConfig):
             config = source
         elif source is None:
             config = frontend_config_for(path)
@@ -476,7 +501,7 @@ class Replay:
             config = source(path)
         with self.lock:
             self.frontend_config = config
-            self.session = SlamSession(self._target_params, config)
+            self.session = SlamSession(self._target_params, config, evaluation=kind.evaluation)
 
     def _resolve_bag(self) -> Path:
         source = self.bag_source
@@ -517,7 +542,7 @@ class Replay:
             frames.close()  # type: ignore[attr-defined]
 
     # ------------------------------------------------------------------ playback
-    def _peek(self) -> Frame | None:
+    def _peek(self) -> Frame | EventStep | None:
         if self._next is None and self._frames is not None:
             self._next = next(self._frames, None)
         return self._next
@@ -554,7 +579,7 @@ class Replay:
         self._notify_maps(ALL_MODES, forced)
         self._notify_status()
 
-    def _apply_frame(self, frame: Frame) -> None:
+    def _apply_frame(self, frame: Frame | EventStep) -> None:
         session = self.session
         log = session.log
         started = time.perf_counter()
