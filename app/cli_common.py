@@ -1,4 +1,4 @@
-"""Command-line options shared by several commands (dataset topics, map and front-end settings)."""
+"""Command-line options shared by several commands (input, topics, map and front-end settings)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from app.params_file import load_params_changes
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.frontend import FrontEndConfig
+from cogmap_core.sources.detect import FORMATS, KINDS, InputKind, LogOptions, resolve_format
+from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
 
 
 def add_topic_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,43 +35,140 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
     )
 
 
+_MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
+    ("alpha", "--alpha", "translation weight, >= 0"),
+    ("beta", "--beta", "rotation weight, >= 0"),
+    ("delta", "--delta", "field threshold, > 1"),
+    ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
+    ("t_total", "--t-total", "cluster total-time threshold (s), > 0"),
+)
+_PAPER_FLAGS = tuple(name for name, _, _ in _MAP_ARGUMENTS)
+
+
 def add_map_arguments(parser: argparse.ArgumentParser) -> None:
-    """The paper's map parameters: ``--alpha --beta --delta --t-interval --t-total``."""
-    d = MapParams()
+    """The paper's map parameters as flags, ``--params FILE[#ENTRY]``, ``--param NAME=VALUE``.
+
+    ``--params`` gives map parameters from a JSON file (e.g. a sweep's best.json, which names
+    every one); the flags and ``--param`` override it. Unset ones stay unset (see
+    :func:`map_changes_from_args`): they keep the default of the input's kind (the paper's for
+    bags, :data:`~cogmap_core.sources.odometry_log.LOG_MAP_PARAMS` for logs), and a resumed
+    session keeps its own values for them.
+    """
+    paper, log = MapParams(), LOG_MAP_PARAMS
+    for name, flag, meaning in _MAP_ARGUMENTS:
+        a, b = getattr(paper, name), getattr(log, name)
+        default = f"default {a:g}" if a == b else f"default {a:g}; {b:g} for logs"
+        parser.add_argument(
+            flag,
+            dest=name,
+            type=float,
+            default=None,
+            help=f"{meaning} ({default}; or the --params file's)",
+        )
     parser.add_argument(
-        "--alpha",
-        type=float,
-        default=d.alpha,
-        help=f"translation weight >= 0 (default {d.alpha:g})",
+        "--params",
+        dest="params_file",
+        default=None,
+        metavar="FILE[#ENTRY]",
+        help="start from the map parameters in a JSON file: {name: value, ...} or a sweep's "
+        "best.json (its smallest_complete setting; #front_ate/0, #paper, ... pick another); "
+        "options given beside it override it",
     )
     parser.add_argument(
-        "--beta", type=float, default=d.beta, help=f"rotation weight, >= 0 (default {d.beta:g})"
-    )
-    parser.add_argument(
-        "--delta", type=float, default=d.delta, help=f"field threshold, > 1 (default {d.delta:g})"
-    )
-    parser.add_argument(
-        "--t-interval",
-        type=float,
-        default=d.t_interval,
-        help=f"cluster interval threshold (s), > 0 (default {d.t_interval:g})",
-    )
-    parser.add_argument(
-        "--t-total",
-        type=float,
-        default=d.t_total,
-        help=f"cluster total-time threshold (s), > 0 (default {d.t_total:g})",
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="any other map parameter (repeatable), e.g. --param integration_radius=0.08; "
+        f"names: {', '.join(n for n in paper.to_dict() if n not in _PAPER_FLAGS)} "
+        "(logs have their own defaults for some, see the README)",
     )
 
 
-def params_from_args(args: argparse.Namespace) -> MapParams:
-    """Map parameters from the command line (out-of-range values name the valid range)."""
-    return MapParams(
-        alpha=args.alpha,
-        beta=args.beta,
-        delta=args.delta,
-        t_interval=args.t_interval,
-        t_total=args.t_total,
+def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
+    """The map parameters given on the command line (name -> value), validated.
+
+    Every parameter a ``--params`` file names (a sweep's best.json names all), then the flags and
+    ``--param`` values over it.
+    """
+    file = getattr(args, "params_file", None)
+    changes: dict[str, float] = load_params_changes(file) if file else {}
+    changes |= {
+        name: getattr(args, name)
+        for name, _, _ in _MAP_ARGUMENTS
+        if getattr(args, name, None) is not None
+    }
+    for item in getattr(args, "param", []) or []:
+        name, sep, text = item.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or not name:
+            raise ParameterError(f"--param {item!r}: expected NAME=VALUE, e.g. huber_scale=0.2")
+        if name in _PAPER_FLAGS:
+            raise ParameterError(f"--param {name}: use --{name.replace('_', '-')} instead")
+        try:
+            changes[name] = float(text)
+        except ValueError:
+            raise ParameterError(f"--param {name}={text!r}: the value is not a number") from None
+    MapParams().with_changes(**changes)  # out-of-range values name the valid range
+    return changes
+
+
+def params_from_args(args: argparse.Namespace, base: MapParams | None = None) -> MapParams:
+    """Map parameters: ``base`` with the options given on the command line.
+
+    ``base`` is the input kind's defaults (the paper's by default); out-of-range values name the
+    valid range.
+    """
+    return (base or MapParams()).with_changes(**map_changes_from_args(args))
+
+
+def add_input_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--format``, and the files of a log: ``--loops``, ``--ground-truth``."""
+    parser.add_argument(
+        "--format",
+        choices=("auto", *FORMATS),
+        default="auto",
+        help="input kind (default auto: detected from the content): bag (ROS bag with camera), "
+        "tuc (TUC SLAM dataset odom2/loop lines), csv (time,v,omega odometry)",
+    )
+    parser.add_argument(
+        "--loops",
+        default=None,
+        metavar="FILE",
+        help="CSV logs: the loop candidates time,matched_time,score (default: the file named "
+        "like the odometry file with 'odometry' replaced by 'loops')",
+    )
+    parser.add_argument(
+        "--ground-truth",
+        default=None,
+        metavar="FILE",
+        help="logs: ground truth (TUC: X_GT.txt beside X_Input.txt; CSV: time,x,y[,theta], "
+        "default the 'ground_truth' companion)",
+    )
+
+
+def input_kind(args: argparse.Namespace, path: Path) -> InputKind:
+    """The kind of ``path`` (``--format`` or detected), with its defaults."""
+    kind = KINDS[resolve_format(path, args.format)]
+    if kind.has_camera and (args.loops is not None or args.ground_truth is not None):
+        raise ParameterError(
+            f"{path} is a bag: --loops and --ground-truth belong to logs "
+            "(a bag's ground truth is a topic, --gt-topic)"
+        )
+    return kind
+
+
+def log_options_from_args(args: argparse.Namespace) -> LogOptions:
+    """How to read a log: ``--frontend`` overrides of its settings and its companion files."""
+    try:
+        config = LogSourceConfig().with_changes(**_overrides(args.frontend))
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"--frontend: {exc}") from None
+    return LogOptions(
+        config=config,
+        loops=None if args.loops is None else Path(args.loops),
+        ground_truth=None if args.ground_truth is None else Path(args.ground_truth),
+        use_ground_truth=not args.no_ground_truth,
     )
 
 
@@ -80,14 +180,14 @@ def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="override a front-end setting (repeatable), e.g. --frontend vt_match_threshold=0.03; "
-        "applied after the iRat defaults and the bag's <name>.frontend.json profile",
+        "applied after the iRat defaults and the bag's <name>.frontend.json profile; for logs "
+        "the log's settings, e.g. --frontend score_threshold=0.9",
     )
 
 
-def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
-    """The front-end config: iRat defaults, the bag's profile, then ``--frontend`` overrides."""
-    overrides: dict[str, float] = dict(read_frontend_profile(bag))
-    for item in args.frontend:
+def _overrides(items: list[str]) -> dict[str, float]:
+    overrides: dict[str, float] = {}
+    for item in items:
         key, sep, value = item.partition("=")
         if not sep:
             raise ParameterError(
@@ -97,18 +197,32 @@ def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
             overrides[key.strip()] = float(value)
         except ValueError:
             raise ParameterError(f"--frontend {item!r}: {value!r} is not a number") from None
+    return overrides
+
+
+def frontend_from_args(args: argparse.Namespace, bag: Path) -> FrontEndConfig:
+    """The front-end config: iRat defaults, the bag's profile, then ``--frontend`` overrides."""
+    overrides: dict[str, float] = dict(read_frontend_profile(bag))
+    overrides.update(_overrides(args.frontend))
     try:
         return FrontEndConfig().with_changes(**overrides)
     except TypeError as exc:
         raise ParameterError(f"--frontend: {exc}") from None
 
 
-def resolve_bag(bag: str | None) -> Path:
-    """The bag to use: the given path, or the built-in default dataset (generated on first use)."""
+def resolve_bag(bag: str | None, logs: bool = True) -> Path:
+    """The input to use: the given path, or the built-in default dataset (generated on first use).
+
+    ``logs``: the command also takes logs of odometry and place recognition (named in the error).
+    """
     if bag is not None:
         path = Path(bag)
         if not path.exists():
-            raise InputFileError(f"{path}: no such bag; give an existing .bag file or omit BAG")
+            if not logs:
+                raise InputFileError(f"{path}: no such bag; give an existing .bag file or omit BAG")
+            raise InputFileError(
+                f"{path}: no such file; give an existing bag or log file, or omit it"
+            )
         return path
     from cogmap_core.datasets.cache import default_dataset_path
 

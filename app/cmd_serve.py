@@ -1,4 +1,4 @@
-"""``cogmap serve [BAG]``: the live web app -- replay a bag, tune the compact map in a browser."""
+"""``cogmap serve [FILE]``: the live web app -- replay a bag or log, tune the maps in a browser."""
 
 from __future__ import annotations
 
@@ -14,14 +14,20 @@ from types import FrameType
 
 from app.cli_common import (
     add_frontend_arguments,
+    add_input_arguments,
     add_map_arguments,
     add_topic_arguments,
     frontend_from_args,
+    input_kind,
+    log_options_from_args,
+    map_changes_from_args,
     params_from_args,
     topics_from_args,
 )
 from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.session_file import describe, resume_session
+from cogmap_core.sources.detect import KINDS
 
 DEFAULT_PORT = 8080
 
@@ -60,11 +66,42 @@ def display_url(host: str, port: int) -> str:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    params = params_from_args(args)  # validate before starting anything
+    map_changes_from_args(args)  # validate before starting anything
     topics = topics_from_args(args)
-    frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile read)
+    if args.bag is None:
+        kind = KINDS["bag"]  # the built-in dataset
+        if args.loops is not None or args.ground_truth is not None:
+            raise ParameterError("--loops and --ground-truth belong to logs; give the log FILE")
+    elif Path(args.bag).exists() or args.format != "auto":
+        kind = input_kind(args, Path(args.bag))
+    else:
+        kind = KINDS["bag"]  # a missing file is reported on the page, as for any bag
+    params = params_from_args(args, kind.map_params)
+    if kind.has_camera:
+        frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile)
+        log = None
+    else:
+        log = log_options_from_args(args)  # validates the log's --frontend settings
     if not 0 < args.port < 65536:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
+    resume = None
+    if args.resume is not None:
+        if not kind.has_camera:
+            raise ParameterError(
+                f"--resume: sessions are for bags; {args.bag} is a log of odometry and place "
+                f"recognition ({kind.name}): serve it without --resume"
+            )
+        if args.bag is None:
+            raise ParameterError(
+                "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
+            )
+        bag_path = Path(args.bag)
+        if not bag_path.exists():
+            raise InputFileError(f"{bag_path}: no such bag; give an existing .bag file")
+        resume = resume_session(
+            args.resume, frontend_from_args(args, bag_path), 4, map_changes_from_args(args)
+        )
+        print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     import viser
 
     from app.server.app import CogmapApp
@@ -87,6 +124,10 @@ def _serve(args: argparse.Namespace) -> int:
         topics=topics,
         rebuild_workers=min(2, os.cpu_count() or 1),
         wait_for_viewer=not args.no_wait,
+        fmt=kind.name,
+        log=log,
+        defaults=kind.map_params,
+        resume=resume,
     )
     stop = threading.Event()
 
@@ -119,12 +160,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Register ``cogmap serve``."""
     parser = subparsers.add_parser(
         "serve",
-        help="live web app: replay a bag in the browser and tune the compact map live",
-        description="Start a viser web server that replays the bag (default: the built-in "
+        help="live web app: replay a bag or log in the browser and tune the compact map live",
+        description="Start a viser web server that replays the input (default: the built-in "
         "dataset) through the SLAM core and streams the standard, scene_integration and compact "
-        "maps live to every connected browser, with sliders to tune the map parameters.",
+        "maps live to every connected browser, with sliders to tune the map parameters. The "
+        "input is an iRat-layout bag, or a log of odometry and place recognition (TUC or CSV; "
+        "no camera panel, the place-recognition score of each link instead).",
     )
-    parser.add_argument("bag", nargs="?", default=None, metavar="BAG", help="iRat-layout ROS bag")
+    parser.add_argument(
+        "bag",
+        nargs="?",
+        default=None,
+        metavar="FILE",
+        help="iRat-layout ROS bag, TUC input file or CSV odometry file",
+    )
     parser.add_argument(
         "--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)"
     )
@@ -148,11 +197,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="start playing at once (default: when the first browser connects)",
     )
     parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="FILE",
+        help="show a session saved by cogmap run --save-session and keep growing it with BAG "
+        "(the robot starts BAG where the session ended)",
+    )
+    parser.add_argument(
         "--static",
         default=None,
         metavar="DIR",
         help="folder of web-facing assets; HTML replays go to DIR/replays (default: static/)",
     )
+    add_input_arguments(parser)
     add_map_arguments(parser)
     add_frontend_arguments(parser)
     add_topic_arguments(parser)

@@ -1,7 +1,9 @@
-"""The headless pipeline: a bag through the front end into the three maps, and a report folder.
+"""The headless pipeline: an input through its front end into the three maps, and a report folder.
 
-``HeadlessPipeline(...).run()`` reads as the list of steps it performs; the result object holds
-everything written to the run folder.
+The input is a bag (camera frames through the RatSLAM front end) or a log of odometry and place
+recognition (steps whose events are known, :mod:`cogmap_core.sources`); :func:`open_source` hides
+the difference. ``HeadlessPipeline(...).run()`` reads as the list of steps it performs; the
+result object holds everything written to the run folder.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import json
 import math
 import time as wallclock
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -21,18 +23,19 @@ from app.plots import map_figure, save_png, size_figure
 from app.report import ReportFolder
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagReader, BagTopics, open_bag
+from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError, InputFileError
-from cogmap_core.evaluation import (
-    LAYOUT_RADIUS,
-    TRUE_LOOP_CLOSURE_DISTANCE,
-    TRUE_LOOP_CLOSURE_HEADING,
-    align_rigid_2d,
-)
+from cogmap_core.errors import CogmapError, InputFileError, ParameterError
+from cogmap_core.evaluation import LAYOUT_RADIUS, align_rigid_2d
+from cogmap_core.fileio import check_writable
+from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
+from cogmap_core.session_file import SessionMeta, resume_session, save_session
+from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
+from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
+from cogmap_core.sources.odometry_log import LogReader
 
 MAP_ORDER: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 #: Every file a report folder can hold (``--force`` replaces only these, see app/report.py).
@@ -51,15 +54,41 @@ ProgressCallback = Callable[[int, int, float], None]
 
 @dataclass(frozen=True, slots=True)
 class RunOptions:
-    """Everything that defines a headless run besides the bag."""
+    """Everything that defines a headless run besides the input (a bag or a log).
+
+    Attributes:
+        params: map parameters of a new session (the caller starts them from the input kind's
+            defaults: :attr:`~cogmap_core.sources.detect.InputKind.map_params`).
+        frontend: front-end settings (None: iRat defaults + the bag's profile; unused for logs).
+        topics: the bag's topics (None: the iRat bag's).
+        image_scale: JPEG decode reduction.
+        force: overwrite a non-empty report folder and an existing ``save_session`` file.
+        format: ``bag``, ``tuc`` or ``csv`` (None: detected from the content).
+        log: how to read a log (ignored for bags).
+        on_clock_jump: a bag's clock jumping back: ``drop`` or ``stop`` (bags only).
+        until_error: a bag corrupt part-way: map what comes before the damage (bags only).
+        resume: continue the session saved in this file (its front end, maps and data time);
+            the bag's frames follow the session's as if the bags were one (bags only).
+        param_changes: with ``resume``, map parameters that replace the session's (its maps
+            are then rebuilt from its events).
+        save_session: write the session to this file at the end of the data (before the final
+            optimisation, so that a resumed run continues exactly where this one stopped; bags
+            only).
+
+    """
 
     params: MapParams = field(default_factory=MapParams)
     frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
     topics: BagTopics | None = None
     image_scale: int = 4
     force: bool = False
+    format: str | None = None  # bag, tuc, csv; None: detected from the content
+    log: LogOptions = field(default_factory=LogOptions)  # how to read a log
     on_clock_jump: str = "drop"  # or "stop": see cogmap_core.datasets.rosbag_reader
     until_error: bool = False  # a bag corrupt part-way: map what comes before the damage
+    resume: Path | None = None
+    param_changes: Mapping[str, float] = field(default_factory=dict)
+    save_session: Path | None = None
 
 
 @dataclass
@@ -70,6 +99,7 @@ class RunResult:
     out_dir: Path
     files: list[Path]
     warnings: list[str] = field(default_factory=list)  # the reader's, one line each
+    session_notes: list[str] = field(default_factory=list)
 
     def table(self) -> str:
         """A compact one-line-per-map summary table."""
@@ -99,10 +129,11 @@ class RunResult:
             f"map within {radius * 100:g} cm of the true path; dead-reckoning ATE "
             f"{fmt(dead_reckoning, '.3f')} m"
         )
+        judged = "position only" if lc.get("tolerance_deg") is None else "position and heading"
         lines.append(
             f"{s['frames']} frames, {s['data_duration_s']:.1f} s of data in {s['wall_s']:.1f} s "
             f"({s['realtime_factor']:.1f}x real time); loop closures {lc['total']} "
-            f"(precision {precision}, position and heading)"
+            f"(precision {precision}, {judged})"
         )
         return "\n".join(lines)
 
@@ -114,20 +145,27 @@ def session_summary(
     last: float,
     wall: float,
     read_warnings: dict[str, Any],
-    layout_radius: float = LAYOUT_RADIUS,
+    layout_radius: float | None = None,
+    source: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The ``summary.json`` of a session: per map sizes, fidelity, accuracy, timings; links.
 
     Args:
         session: the session (its maps and event log).
-        dataset: the bag, as written into the summary.
+        dataset: the input, as written into the summary.
         first: data time of the first frame processed (s).
         last: data time of the last frame processed (s).
         wall: wall time the processing took (s).
         read_warnings: the reader's non-zero problem counters.
-        layout_radius: radius of layout completeness and correctness (m).
+        layout_radius: radius of layout completeness and correctness (m); default: the
+            session's (:attr:`SlamSession.evaluation`).
+        source: what the input is and how it was read (``format``, a log's settings and what
+            became of its loop candidates).
 
     """
+    judging = session.evaluation
+    if layout_radius is None:
+        layout_radius = judging.layout_radius
     duration = max(last - first, 0.0)
     maps: dict[str, Any] = {}
     for mode in MAP_ORDER:
@@ -161,21 +199,17 @@ def session_summary(
         }
     else:
         assert score.position_error is not None and score.heading_error is not None
+        heading = judging.loop_heading
+        scores = session.log.link_scores
         loops = {
             "total": score.total,
             "true": score.true,
             "false": score.false,
             "precision": score.precision,
-            "tolerance_m": TRUE_LOOP_CLOSURE_DISTANCE,
-            "tolerance_deg": round(math.degrees(TRUE_LOOP_CLOSURE_HEADING), 6),
+            "tolerance_m": judging.loop_distance,
+            "tolerance_deg": None if heading is None else round(math.degrees(heading), 6),
             "false_links": [
-                {
-                    "time": round(links[k][0], 6),
-                    "target": links[k][1],
-                    "position_error_m": round(float(score.position_error[k]), 4),
-                    "heading_error_deg": round(math.degrees(float(score.heading_error[k])), 2),
-                }
-                for k in score.false_indices
+                _false_link(session, links, scores, score, k) for k in score.false_indices
             ],
         }
     dead_reckoning = session.log.dead_reckoning_ate()
@@ -198,7 +232,40 @@ def session_summary(
         "maps": maps,
         "loop_closures": loops,
         "read_warnings": read_warnings,
+        "source": dict(source or {}),
     }
+
+
+def _false_link(
+    session: SlamSession,
+    links: list[tuple[float, int, float]],
+    scores: list[float | None],
+    score: Any,
+    k: int,
+) -> dict[str, Any]:
+    entry: dict[str, Any] = {
+        "time": round(links[k][0], 6),
+        "target": links[k][1],
+        "position_error_m": round(float(score.position_error[k]), 4),
+    }
+    if session.evaluation.loop_heading is not None:
+        entry["heading_error_deg"] = round(math.degrees(float(score.heading_error[k])), 2)
+    link_score = scores[k]
+    if link_score is not None:
+        entry["score"] = round(link_score, 6)
+    return entry
+
+
+def source_description(reader: Source) -> dict[str, Any]:
+    """What the input is and how it was read, for the report."""
+    if isinstance(reader, LogReader):
+        return reader.description()
+    return {"format": "bag"}
+
+
+def read_warnings(reader: Source) -> dict[str, Any]:
+    """The reader's non-zero problem counters (``summary.json``'s ``read_warnings``)."""
+    return {k: v for k, v in asdict(reader.counters).items() if k != "frames" and v}
 
 
 def _rounded(value: float) -> float | None:
@@ -225,7 +292,7 @@ def write_sizes_csv(maps: Mapping[MapMode, CognitiveMap], handle: TextIO) -> Non
 
 
 class HeadlessPipeline:
-    """Process a whole bag once and write the report folder.
+    """Process a whole input (bag or log) once and write the report folder.
 
     The report is staged and moved into place only when complete (:class:`app.report.ReportFolder`):
     an error, a full disk or Ctrl-C at any point leaves ``out_dir`` as it was.
@@ -239,24 +306,91 @@ class HeadlessPipeline:
         progress: ProgressCallback | None = None,
         announce: Callable[[str], None] | None = None,
     ) -> None:
-        """Set up a run of ``bag`` into ``out_dir``; ``announce`` is told when writing starts."""
+        """Set up a run of ``bag`` (a bag or a log) into ``out_dir``.
+
+        ``announce`` is told when writing starts.
+
+        Raises:
+            ParameterError: a session (``resume``, ``save_session``) asked of a log.
+
+        """
         self.bag = Path(bag)
         self.out_dir = Path(out_dir)
         self.options = options or RunOptions()
         self.progress = progress
         self.announce = announce
-        self.frontend = self.options.frontend or frontend_config_for(self.bag)
-        self.session = SlamSession(self.options.params, self.frontend)
+        self.format = resolve_format(self.bag, self.options.format)
+        self.kind = KINDS[self.format]
+        self.frontend = (
+            (self.options.frontend or frontend_config_for(self.bag))
+            if self.kind.has_camera
+            else None
+        )
         self.files: list[Path] = []
+        self.session_notes: list[str] = []
+        options = self.options
+        if not self.kind.has_camera and (
+            options.resume is not None or options.save_session is not None
+        ):
+            flag = "--resume" if options.resume is not None else "--save-session"
+            raise ParameterError(
+                f"{flag}: sessions are for bags; {self.bag} is a log of odometry and place "
+                f"recognition ({self.format}): run it whole, without {flag}"
+            )
+        if options.save_session is not None:
+            check_session_target(options.save_session, options.force)
+        self.meta: SessionMeta | None = None
+        if options.resume is not None:
+            self.session = self._resume(options.resume)
+        else:
+            self.session = SlamSession(
+                options.params, self.frontend, evaluation=self.kind.evaluation
+            )
+
+    def _resume(self, path: Path) -> SlamSession:
+        """Load the session to continue (refused before anything is written)."""
+        started = wallclock.perf_counter()
+        session, meta = resume_session(
+            path, self.frontend, self.options.image_scale, self.options.param_changes
+        )
+        self.meta = meta
+        self.session_notes.append(
+            f"resumed {path} in {wallclock.perf_counter() - started:.2f} s: "
+            f"{session_description(meta, session)}"
+        )
+        return session
 
     def run(self) -> RunResult:
-        """Open the bag, check the output, process every frame, evaluate, write the report."""
+        """Open the input, check the output, process every frame, evaluate, write the report."""
         with (
-            self._open_bag() as reader,
+            self._open_source() as reader,
             ReportFolder(self.out_dir, REPORT_FILES, self.options.force) as report,
         ):
+            offset = 0.0
+            if isinstance(reader, BagReader):  # a bag: what a session needs to know of it
+                log = self.session.log
+                end = float(log.frame_time[-1]) if log.frames else 0.0
+                if self.meta is None:
+                    self.meta = SessionMeta(
+                        epoch=reader.start_stamp, image_scale=self.options.image_scale
+                    )
+                else:
+                    offset = self.meta.resume_offset(reader.start_stamp, end)
             started = wallclock.perf_counter()
-            first, last = self._process_frames(reader)
+            frames_before = self.session.log.frames
+            first, last = self._process_frames(reader, offset)
+            if self.meta is not None:
+                self.meta.bags.append(
+                    {
+                        "bag": str(self.bag),
+                        "offset": offset,
+                        "frames": self.session.log.frames - frames_before,
+                        "first": first,
+                        "last": last,
+                    }
+                )
+            if self.options.save_session is not None:
+                self._save_session(self.options.save_session)
             self.session.finish()
             wall = wallclock.perf_counter() - started
             summary = self._summary(reader, first, last, wall)
@@ -269,25 +403,30 @@ class HeadlessPipeline:
                 self._write_trajectories(report)
                 self._write_figures(report, last, summary)
             self.files = report.commit()
-        return RunResult(summary, report.out_dir, list(self.files), reader.warnings)
+        return RunResult(
+            summary, report.out_dir, list(self.files), reader.warnings, list(self.session_notes)
+        )
 
     # ------------------------------------------------------------------ steps
     def _announce(self, message: str) -> None:
         if self.announce is not None:
             self.announce(message)
 
-    def _open_bag(self) -> BagReader:
+    def _open_source(self) -> Source:
         o = self.options
-        return open_bag(
+        return open_source(
             self.bag,
-            o.topics,
+            self.format,
+            topics=o.topics,
             image_scale=o.image_scale,
+            log=o.log,
             on_clock_jump=o.on_clock_jump,
             on_corrupt="stop" if o.until_error else "error",
         )
 
     def _check_image_size(self, image: np.ndarray) -> None:
         """Refuse camera images too small for the view template (they would be magnified)."""
+        assert self.frontend is not None
         min_w, min_h = self.frontend.minimum_image_size()
         height, width = image.shape[:2]
         if width < min_w or height < min_h:
@@ -300,42 +439,65 @@ class HeadlessPipeline:
                 f"use a camera topic with images of at least {need_w}x{need_h} px"
             )
 
-    def _process_frames(self, reader: BagReader) -> tuple[float, float]:
+    def _process_frames(self, reader: Source, offset: float = 0.0) -> tuple[float, float]:
+        """Every frame (or log step) through the session, placed at ``offset`` + its time."""
         first = last = math.nan
         total = reader.info.frame_count
         for frame in reader.frames():
+            if offset:
+                frame = replace(frame, time=frame.time + offset)
             if math.isnan(first):
-                self._check_image_size(frame.image)
+                if isinstance(frame, Frame):
+                    self._check_image_size(frame.image)
                 first = frame.time
             last = frame.time
             self.session.process(frame)
             if self.progress is not None:
                 self.progress(frame.index + 1, total, frame.time)
         if math.isnan(first):
-            raise InputFileError(f"{self.bag}: no decodable camera frame; nothing to map")
-        self.counters = reader.counters
+            what = "decodable camera frame" if self.kind.has_camera else "step"
+            raise InputFileError(f"{self.bag}: no {what}; nothing to map")
         return first, last
 
-    def _summary(self, reader: BagReader, first: float, last: float, wall: float) -> dict[str, Any]:
-        warnings = {k: v for k, v in asdict(self.counters).items() if k != "frames" and v}
-        return session_summary(self.session, str(self.bag), first, last, wall, warnings)
+    def _save_session(self, path: Path) -> None:
+        assert self.meta is not None
+        started = wallclock.perf_counter()
+        save_session(path, self.session, self.meta)
+        self.session_notes.append(
+            f"session saved to {path} ({path.stat().st_size / 1e6:.1f} MB) in "
+            f"{wallclock.perf_counter() - started:.2f} s: "
+            f"{session_description(self.meta, self.session)}"
+        )
+
+    def _summary(self, reader: Source, first: float, last: float, wall: float) -> dict[str, Any]:
+        return session_summary(
+            self.session,
+            str(self.bag),
+            first,
+            last,
+            wall,
+            read_warnings(reader),
+            source=source_description(reader),
+        )
 
     @staticmethod
     def _write_json(report: ReportFolder, name: str, payload: dict[str, Any]) -> None:
         report.write_text(name, json.dumps(payload, indent=2) + "\n")
 
     def _write_config(self, report: ReportFolder) -> None:
-        self._write_json(
-            report,
-            "config.json",
-            {
-                "dataset": str(self.bag),
-                "image_scale": self.options.image_scale,
-                "map": self.options.params.to_dict(),
-                "frontend": self.frontend.to_dict(),
-                "topics": asdict(self.options.topics or BagTopics()),
-            },
-        )
+        config: dict[str, Any] = {"dataset": str(self.bag), "format": self.format}
+        config["map"] = self.options.params.to_dict()
+        if self.frontend is not None:
+            config["image_scale"] = self.options.image_scale
+            config["frontend"] = self.frontend.to_dict()
+            config["topics"] = asdict(self.options.topics or BagTopics())
+        else:
+            log = self.options.log
+            config["frontend"] = log.config.to_dict()
+            config["loops"] = None if log.loops is None else str(log.loops)
+            config["ground_truth"] = None if log.ground_truth is None else str(log.ground_truth)
+            config["use_ground_truth"] = log.use_ground_truth
+        self._write_json(report, "config.json", config)
 
     def _write_summary(self, report: ReportFolder, summary: dict[str, Any]) -> None:
         self._write_json(report, "summary.json", summary)
@@ -397,6 +559,20 @@ class HeadlessPipeline:
         save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
 
 
+def check_session_target(path: Path, force: bool) -> None:
+    """Refuse a session file target that would fail only at the end of a long run."""
+    if path.is_dir():
+        raise InputFileError(f"{path} is a directory; give --save-session a file name")
+    if path.exists() and not force:
+        raise InputFileError(
+            f"{path} already exists; choose another --save-session file or pass --force to "
+            "overwrite it"
+        )
+    if not path.parent.is_dir():
+        raise InputFileError(f"folder {path.parent} of --save-session does not exist; create it")
+    check_writable(path.parent)  # a probe file: mode bits do not stop root
+
+
 def run_headless(
     bag: Path,
     out_dir: Path,
@@ -404,7 +580,7 @@ def run_headless(
     progress: ProgressCallback | None = None,
     announce: Callable[[str], None] | None = None,
 ) -> RunResult:
-    """Library entry of ``cogmap run``: process ``bag`` and write the report into ``out_dir``.
+    """Library entry of ``cogmap run``: process ``bag`` (or a log) into the report ``out_dir``.
 
     ``announce`` receives one-line notes of what is happening (e.g. that writing has started).
     """
@@ -413,4 +589,4 @@ def run_headless(
     except CogmapError:
         raise
     except MemoryError:
-        raise CogmapError("out of memory while processing the bag") from None
+        raise CogmapError("out of memory while processing the input") from None

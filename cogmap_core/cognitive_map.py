@@ -54,7 +54,7 @@ from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot, wrap
 from cogmap_core.neighborhood_fields import is_novel, neighborhood_field
 from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph
 from cogmap_core.posegraph import PoseGraph
-from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate
+from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate, RobotInMap
 from cogmap_core.scene_integration import SceneIntegration
 from cogmap_core.short_edges import remove_short_edges
 
@@ -369,17 +369,13 @@ class CognitiveMap:
         self._set_current(vid, _ZERO)
 
     def _relocalisation_ok(self, target: int, relative_rad: float, time: float) -> bool:
-        check = self.gate.check(
-            self.graph,
+        robot = RobotInMap(
             self._current,
-            self._accum,
+            (self._accum[0], self._accum[1], self._accum[2]),
             self._travelled,
-            target,
-            relative_rad,
-            time,
-            self.params,
             self._last_rotation,
         )
+        check = self.gate.check(self.graph, robot, target, relative_rad, time, self.params)
         if not check.accepted:
             self.refused.append(check)
             self.counters.refused_relocalisations += 1
@@ -433,7 +429,9 @@ class CognitiveMap:
     def _relocalised(self, target: int, to_place: tuple[float, float, float], t: float) -> None:
         """An accepted relocalisation: a revisit run may close (and be integrated) here."""
         if self._integrates:
-            merged = self.integration.on_relocalised(self.graph, target, to_place, t, self.params)
+            merged = self.integration.on_relocalised(
+                self.graph, target, to_place, t, self.params, self._current
+            )
             if merged:
                 self.counters.integrated += merged
                 self._follow_merges()

@@ -34,7 +34,8 @@ class MapParams:
     """Parameters of the cognitive map.
 
     Defaults are the paper's: alpha = beta = 10, delta = 3.746, T_interval = 2 s,
-    T_total = 100 s. The remaining ones the paper leaves open; the defaults suit iRat-scale mazes.
+    T_total = 100 s, Huber loss. The remaining ones the paper leaves open; the defaults suit
+    iRat-scale mazes (0.3 m corridors); docs/maps.md gives the measurements behind them.
 
     Attributes:
         alpha: translation weight of the neighborhood field
@@ -47,13 +48,26 @@ class MapParams:
         t_total: ... and no more than ``t_total`` seconds after the cluster's first edge.
         huber_scale: scale of the Huber loss on every edge residual.
         short_edge_threshold: after optimisation, edges shorter than this are contracted.
-        integration_radius: a revisiting vertex within this distance of the vertex it revisits
-            (after optimisation) is merged into it (scene integration).
-        integration_max_residual: ... provided the loop-closure edge between them converged,
-            i.e. its residual norm after optimisation is at most this (outliers are kept apart).
-        integration_min_age: a new vertex joined by an edge to a vertex at least this many
-            seconds older was made while revisiting; within ``integration_radius`` of that
-            vertex after optimisation, it is merged into it.
+        integration_radius: scene integration merges a revisit run only when each of its
+            vertices lies within this distance of an edge of known ground
+            (:mod:`~cogmap_core.scene_integration`).
+        integration_max_residual: ... and the run's closing loop-closure link agrees with the
+            map: its residual, weighed as the optimiser weighs it, is at most this.
+        integration_min_age: known ground is what the map had at least this many seconds
+            before the run began (a link to a vertex the robot just made ends no run).
+        gate_position: a relocalisation (link + set current) is followed only when the pose it
+            claims is within this distance of the robot's pose in the map, plus
+            ``gate_drift_position`` per metre of map path between them
+            (:mod:`~cogmap_core.relocalisation`); 1e9 follows every one (the paper).
+        gate_heading: ... and its heading within this, plus ``gate_drift_heading`` per metre
+            and the latest frame's rotation.
+        gate_drift_position: position drift of odometry allowed per metre of path (m/m).
+        gate_drift_heading: heading drift of odometry allowed per metre of path (rad/m).
+        gate_consensus: this many refused relocalisations in a row that agree with each other
+            are followed after all (the map's own estimate was off); 0 never.
+        edge_noise_model: 1 weighs each edge's residual by its expected precision
+            (:mod:`~cogmap_core.edge_noise`); 0 gives every residual the same weight (the
+            paper's formulation).
 
     """
 

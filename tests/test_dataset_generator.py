@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -14,6 +15,7 @@ from cogmap_core.datasets import (
     MazeConfig,
     OdometryModel,
     generate_maze_bag,
+    generator,
     load_layout,
     open_bag,
 )
@@ -139,13 +141,31 @@ def test_same_config_same_bag_and_seed_matters(tmp_path: Path, loop_file: Path) 
     assert a.path.read_bytes() != c.path.read_bytes()
 
 
-def test_parallel_rendering_gives_the_same_frames(loop_file: Path) -> None:
+def test_parallel_rendering_gives_the_same_frames(
+    loop_file: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     plan = plan_dataset(MazeConfig(layout=str(loop_file), laps=1, seed=2, fps=2.0))
     used, serial = render_frames(plan, workers=1)
     assert used == 1
+    expected = list(serial)
+    monkeypatch.setattr(generator, "_CHUNK", 2)  # many chunks, to see the window move
+    submitted: list[int] = []
+
+    class Counting(generator.ProcessPoolExecutor):  # type: ignore[misc]
+        def submit(self, *args: Any, **kwargs: Any) -> Any:
+            submitted.append(1)
+            return super().submit(*args, **kwargs)
+
+    monkeypatch.setattr(generator, "ProcessPoolExecutor", Counting)
     used, parallel = render_frames(plan, workers=2, min_frames_per_worker=1)
     assert used == 2
-    assert list(serial) == list(parallel)
+    frames = []
+    for k, jpeg in enumerate(parallel):
+        frames.append(jpeg)
+        # never more than _IN_FLIGHT chunks per worker ahead of the consumer (flat memory)
+        assert len(submitted) <= k // 2 + 1 + generator._IN_FLIGHT * used
+    assert len(expected) > 2 * 2 * generator._IN_FLIGHT * used  # the window did move
+    assert frames == expected
 
 
 def test_existing_output_and_interrupted_generation(tmp_path: Path, loop_file: Path) -> None:

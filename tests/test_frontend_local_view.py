@@ -179,6 +179,32 @@ def test_fast_matcher_equals_exhaustive_search() -> None:
     assert 50 < matched <= len(queries) - 30  # both outcomes are exercised
 
 
+def test_level0_key_follows_the_data_and_stays_exact() -> None:
+    """Templates of equal brightness (normalised views): the key is not the window sum."""
+    rng = np.random.default_rng(21)
+
+    def normalised(t: np.ndarray) -> np.ndarray:
+        return np.clip(np.rint(t * (100.0 / t.mean())), 0, 255).astype(np.uint8)
+
+    stored = [normalised(t.astype(float)) for t in _families(rng, 300)]
+    lv = LocalViewCells(FrontEndConfig())
+    for t in stored:
+        lv.add(t)
+    assert lv._indexed > 0
+    assert set(lv._signs.tolist()) == {-1.0, 1.0}  # a signed key, not the plain window sum
+    keys = lv._keys_all[: lv.count].ravel()
+    sums = lv._desc1[: lv.count].reshape(-1, lv._k1).sum(axis=1)
+    assert keys.std() > 2 * sums.std()  # it spreads the pairs wider than the window sum
+    queries = [normalised(t.astype(float)) for t in _families(rng, 120)]
+    for q in queries + stored[::29]:
+        fast, slow = lv.match(q), lv.match_exhaustive(q)
+        assert (fast.template_id, fast.offset, fast.sad) == (
+            slow.template_id,
+            slow.offset,
+            slow.sad,
+        )
+
+
 def test_observe_reports_the_error_of_a_match() -> None:
     lv = LocalViewCells(EXACT)
     pano = strip(9)

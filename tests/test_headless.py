@@ -30,6 +30,7 @@ SUMMARY_KEYS = {
     "maps",
     "loop_closures",
     "read_warnings",
+    "source",
 }
 MAP_KEYS = {
     "vertices",
@@ -80,6 +81,7 @@ def test_summary_matches_the_bag_and_ground_truth(report: Path, maze_bag: Path, 
     with open_bag(maze_bag) as reader:
         info = reader.info
     assert summary["dataset"] == str(maze_bag)
+    assert summary["source"] == {"format": "bag"}
     assert summary["frames"] == info.frame_count == reference.log.frames
     assert summary["data_duration_s"] == pytest.approx(
         reference.log.frame_time[-1] - reference.log.frame_time[0], abs=1e-6
@@ -179,7 +181,7 @@ def test_sizes_csv_and_figures(report: Path, reference):
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, maze_bag: Path, capsys):
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "missing.bag"), "--out", str(out)]) == 2
-    assert "no such bag" in capsys.readouterr().err
+    assert "no such file" in capsys.readouterr().err
     assert main(["run", str(maze_bag), "--out", str(out), "--delta", "1.0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "delta=1.0 is out of range" in err[0] and "(1, " in err[0]
@@ -187,6 +189,14 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, maze_bag: Path, capsys
     assert "alpha=-2.0 is out of range" in capsys.readouterr().err
     assert main(["run", str(maze_bag), "--out", str(out), "--t-total", "0"]) == 2
     assert "t_total=0.0 is out of range" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gamma=1"]) == 2
+    assert "unknown map parameter(s) ['gamma']" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "huber_scale"]) == 2
+    assert "expected NAME=VALUE" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gate_heading=x"]) == 2
+    assert "gate_heading='x': the value is not a number" in capsys.readouterr().err
+    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gate_position=-1"]) == 2
+    assert "gate_position=-1.0 is out of range" in capsys.readouterr().err
     truncated = tmp_path / "truncated.bag"
     truncated.write_bytes(maze_bag.read_bytes()[:200_000])
     assert main(["run", str(truncated), "--out", str(out)]) == 2

@@ -150,6 +150,30 @@ def test_chain_of_revisit_vertices_removed_case_c():
     assert standard.num_vertices == LAP + 12
 
 
+def test_revisits_recognised_by_links_alone_are_integrated():
+    """A front end that links without moving the robot (odometry + place recognition logs)."""
+    loop = SquareLoop()
+    loop.first_lap()
+    for _ in range(LAP):
+        position = loop.step % LAP
+        if position % 4 == 2:  # a new vertex every 4 steps on known ground ...
+            loop.new.append(loop.s.create())
+        if position % 8 == 0:  # ... and the place recognised every 8: a link, no set current
+            loop.s.link(loop.first[position])
+        loop.advance()
+    loop.s.link(loop.first[0])
+    standard = build("standard", loop.s)
+    assert standard.num_vertices == LAP + LAP // 4
+    cmap = build("scene_integration", loop.s)
+    assert alive(cmap) == loop.first  # every run between two links re-walked known ground
+    for v in loop.new:  # each merged into the old vertex at its place
+        kept, offset = cmap.resolve(v)
+        np.testing.assert_allclose(
+            between(loop.s.truth[kept], loop.s.truth[v])[:2], offset[:2], atol=1e-9
+        )
+        assert np.hypot(*offset[:2]) <= 0.5 * STEP + 1e-9
+
+
 # ------------------------------------------------------------------------------------------
 # what is never removed
 # ------------------------------------------------------------------------------------------

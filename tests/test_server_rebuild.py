@@ -30,7 +30,7 @@ from cogmap_core.clustering import LoopClosureClusterer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.events import LinkToVertex, MapEvent, Odometry
-from cogmap_core.slam import SlamSession
+from cogmap_core.slam import EventLog, SlamSession
 from tests import test_server_support as support
 from tests.test_server_support import assert_same_map, running_app
 
@@ -217,3 +217,20 @@ def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
             assert app.replay.session.maps[mode] is before[mode]
             assert app.replay.session.maps[mode].params.t_total == kept
             assert_same_map(before[mode], reference.rebuild(MapParams(t_total=kept))[mode])
+
+
+def test_a_log_copy_kept_in_step_by_columns_is_the_log(reference: SlamSession) -> None:
+    """What a worker holds (EventLog.extend, two pieces) has the log's events and frames."""
+    log = reference.log
+    copy = EventLog()
+    half = log.frames // 2
+    for lo, hi in ((0, half), (half, log.frames)):
+        start = int(log.frame_end[lo - 1]) if lo else 0
+        end = int(log.frame_end[hi - 1])
+        columns = {k: v[start:end] for k, v in log.columns(end).items()}
+        copy.extend(columns, log.frame_end[lo:hi], log.frame_time[lo:hi])
+    assert copy.frames == log.frames and copy.event_count == log.event_count
+    assert list(copy.events) == list(log.events)
+    assert np.array_equal(copy.frame_time, log.frame_time)
+    with pytest.raises(ValueError, match="frame ends"):
+        copy.extend(log.columns(3), [2, 1], [1.0, 2.0])

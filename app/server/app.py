@@ -63,8 +63,12 @@ from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagTopics, open_bag
 from cogmap_core.errors import CogmapError
+from cogmap_core.event_file import KIND_LINK
 from cogmap_core.events import LinkToVertex
-from cogmap_core.frames import Frame
+from cogmap_core.frames import EventStep, Frame
+from cogmap_core.session_file import SessionMeta
+from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.sources.detect import LogOptions
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -84,6 +88,28 @@ SPEEDS: dict[str, float] = {
 }
 #: A viewer joining after this much data was replayed is told so (s).
 LATE_JOIN_S = 5.0
+RECENT_LINKS = 8
+
+
+def recent_links(log: EventLog, frames: int, count: int) -> list[tuple[float, int, float | None]]:
+    """The last ``count`` links of the first ``frames`` frames: (time, target, score), in order.
+
+    Read from the log's columns (the score is None where the link has none).
+    """
+    end = int(log.frame_end[frames - 1]) if frames else 0
+    if count <= 0 or end <= 0:
+        return []
+    columns = log.columns(end)
+    links = np.flatnonzero(columns["kind"] == KIND_LINK)[-count:]
+    return [
+        (t, r, None if math.isnan(score) else score)
+        for t, r, score in zip(
+            columns["time"][links].tolist(),
+            columns["ref"][links].tolist(),
+            columns["score"][links].tolist(),
+            strict=True,
+        )
+    ]
 
 
 def _log_refusal(message: str) -> None:
@@ -127,6 +153,12 @@ class CogmapApp:
         rebuild_workers: worker processes that rebuild maps after a parameter change
             (:mod:`app.server.rebuild`; 0: on the replay's thread).
         wait_for_viewer: with ``autoplay``, start playing when the first browser connects.
+        fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
+        log: how to read a log (ignored for bags).
+        defaults: what "reset" returns to (default: the paper's values; for logs, the
+            defaults of that kind of input).
+        resume: a loaded session to show and continue on the bag (see :class:`Replay`); its
+            parameters are the sliders' initial values.
 
     """
 
@@ -144,8 +176,13 @@ class CogmapApp:
         topics: BagTopics | None = None,
         rebuild_workers: int = 2,
         wait_for_viewer: bool = False,
+        fmt: str | None = None,
+        log: LogOptions | None = None,
+        defaults: MapParams | None = None,
+        resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
+        self.defaults = defaults or MapParams()
         for spec in ALL_SLIDERS:
             check_spec(spec)
         self.server = server
@@ -188,7 +225,11 @@ class CogmapApp:
         self._figures_busy = False
         threading.Thread(target=self._figures_loop, name="cogmap-figures", daemon=True).start()
         self.started_at = time.monotonic()
-        self.replay = self._make_replay(bag, params, speed, autoplay and not wait_for_viewer)
+        self.replay = self._make_replay(
+            bag, params, speed, autoplay and not wait_for_viewer, fmt=fmt, log=log, resume=resume
+        )
+        if resume is not None:
+            params = resume[0].params
         self.streamer = SceneStreamer(server)
         self._build_gui(params or MapParams(), speed, autoplay)
         self._guard_inputs()
@@ -197,7 +238,14 @@ class CogmapApp:
         self.show_maps(MapMode.COMPACT)
 
     def _make_replay(
-        self, bag: BagSource, params: MapParams | None, speed: float, autoplay: bool
+        self,
+        bag: BagSource,
+        params: MapParams | None,
+        speed: float,
+        autoplay: bool,
+        fmt: str | None = None,
+        log: LogOptions | None = None,
+        resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> Replay:
         return Replay(
             bag,
@@ -209,7 +257,13 @@ class CogmapApp:
             image_scale=self._image_scale,
             topics=self._topics,
             builder=make_builder(self._workers),
+            fmt=fmt,
+            log=log,
+            resume=resume,
         )
+
+    def _defaults_name(self) -> str:
+        return "paper values" if self.defaults == MapParams() else "defaults"
 
     # ================================================================== lifecycle
     def start(self) -> None:
@@ -278,6 +332,7 @@ class CogmapApp:
                 np.zeros((60, 104, 3), dtype=np.uint8), label="camera", format="jpeg"
             )
             self.template_md = gui.add_markdown("view template: –")
+            self.links_html = gui.add_html("")  # logs: the latest links and their scores
             self.counters_html = gui.add_html("")
 
         with gui.add_folder("Map parameters — shared"):
@@ -288,8 +343,9 @@ class CogmapApp:
             with gui.add_folder("Advanced", expand_by_default=False):
                 for spec in ADVANCED_SLIDERS:
                     self._add_param(spec, params)
-            self.reset_button = gui.add_button("reset to paper values", icon=viser.Icon.RESTORE)
-            self.params_md = gui.add_html(self._params_message("paper values"))
+            label = "reset to paper values" if self.defaults == MapParams() else "reset to defaults"
+            self.reset_button = gui.add_button(label, icon=viser.Icon.RESTORE)
+            self.params_md = gui.add_html(self._params_message(self._defaults_name()))
         self.reset_button.on_click(lambda _: self.reset_params())
 
         with gui.add_folder("Help", expand_by_default=False):
@@ -649,18 +705,18 @@ class CogmapApp:
             self.replay.set_params(params)
 
     def reset_params(self) -> None:
-        """Back to the paper's parameter values (one rebuild)."""
-        paper = MapParams()
+        """Back to the default parameter values (the paper's, or the log's; one rebuild)."""
+        defaults = self.defaults
         self._suppress_param_events = True
         try:
             for name, slider in self.param_sliders.items():
-                slider.value = getattr(paper, name)
-                self.param_boxes[name].value = format_value(getattr(paper, name))
+                slider.value = getattr(defaults, name)
+                self.param_boxes[name].value = format_value(getattr(defaults, name))
         finally:
             self._suppress_param_events = False
-        self.params_md.content = self._params_message("paper values")
-        if self.replay.params != paper:
-            self.replay.set_params(paper)
+        self.params_md.content = self._params_message(self._defaults_name())
+        if self.replay.params != defaults:
+            self.replay.set_params(defaults)
 
     # ================================================================== listener (worker thread)
     def on_status(self, replay: Replay) -> None:
@@ -668,7 +724,7 @@ class CogmapApp:
         if self._status_limit.due(forced=replay.state is not PlaybackState.PLAYING):
             self._update_status()
 
-    def on_frame(self, replay: Replay, frame: Frame, view_template: int | None) -> None:
+    def on_frame(self, replay: Replay, frame: Frame | EventStep, view_template: int | None) -> None:
         """Show the camera image (rate-limited; the latest one is shown when playback stops)."""
         self._pending_frame = (frame, view_template)
         if self._image_limit.due(not replay.playing):
@@ -680,12 +736,36 @@ class CogmapApp:
             return
         self._pending_frame = None
         frame, view_template = pending
+        if isinstance(frame, EventStep):  # a log: no camera; the latest links' scores instead
+            self._show_links(frame)
+            return
         r = self.replay
         self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
             f"view template **{template}** · frame {r.cursor} / {r.total_frames} · "
             f"t = {frame.time:.2f} s"
+        )
+
+    def _show_links(self, step: EventStep) -> None:
+        """Hide the camera panel; list the latest place-recognition links with their scores."""
+        if self.camera_image.visible:
+            self.camera_image.visible = False
+        with self.replay.lock:
+            recent = recent_links(self.replay.session.log, self.replay.cursor, RECENT_LINKS)
+        rows = "".join(
+            f"<tr><td>{t:.1f}</td><td>{target}</td><td>{'–' if score is None else f'{score:.3f}'}"
+            "</td></tr>"
+            for t, target, score in reversed(recent)
+        )
+        self.template_md.content = f"step {step.index} · t = {step.time:.2f} s"
+        self.links_html.content = (
+            '<div id="cogmap-links" style="font-size:0.85em"><b>place recognition</b>: latest '
+            "links (score of each)"
+            '<table style="width:100%;font-variant-numeric:tabular-nums">'
+            "<tr><th>t (s)</th><th>to vertex</th><th>score</th></tr>"
+            + (rows or '<tr><td colspan="3">none yet</td></tr>')
+            + "</table></div>"
         )
 
     def on_maps(self, replay: Replay, modes: tuple[MapMode, ...], forced: bool) -> None:
@@ -751,7 +831,7 @@ class CogmapApp:
             key = (id(log_), log_.frames)
             if key != self._false_key:
                 self._false_key = key
-                self._false_times = false_link_times(log_)
+                self._false_times = false_link_times(log_, replay.session.evaluation)
                 changed = True
             for mode in modes:
                 cmap = replay.session.maps[mode]
@@ -759,7 +839,7 @@ class CogmapApp:
                         log_.frames)  # fmt: skip
                 if self._figures_key.get(mode) == mkey:
                     continue
-                figures = map_figures(log_, cmap)
+                figures = map_figures(log_, cmap, replay.session.evaluation)
                 with self.scene_lock:
                     self._figures_key[mode] = mkey
                     self._figures[mode] = figures
@@ -788,7 +868,7 @@ class CogmapApp:
     def _publish_scene(self) -> None:
         session = self.replay.session
         log_ = session.log
-        truth = log_.ground_truth if log_.ground_truth else None
+        truth = log_.ground_truth if len(log_.ground_truth) else None
         count = min(self.replay.cursor, len(log_.ground_truth))
         extras = {
             mode: MapExtras(
@@ -916,6 +996,7 @@ class CogmapApp:
             for key, label, value in rows
         )
         figures = {m: self.map_figures(m, session.maps[m]) for m in ORDER}
+        radius = f"{session.evaluation.layout_radius * 100:g} cm"  # the input kind's
         sections = (
             (
                 "size",
@@ -931,8 +1012,8 @@ class CogmapApp:
                 "accuracy",
                 (
                     ("ate", "ATE (m)"),
-                    ("completeness", "completeness (8 cm)"),
-                    ("correctness", "correctness (8 cm)"),
+                    ("completeness", f"completeness ({radius})"),
+                    ("correctness", f"correctness ({radius})"),
                     ("false", "false loop closures in the map"),
                 ),
             ),
@@ -964,7 +1045,7 @@ class CogmapApp:
 
     def _update_chart(self) -> None:
         maps = dict(self.replay.session.maps.maps)
-        data = chart_data(maps, self.replay.frame_time)
+        data = chart_data(maps, self.replay.data_time)  # session time (bag time unless resuming)
         top = y_top(max(float(np.max(series)) for series in data[1:7]))
         with self.server.atomic():
             if self.chart.scales != chart_options(top)["scales"]:

@@ -17,20 +17,19 @@ import math
 import re
 import socket
 from collections.abc import Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import viser
 
-from app.pipeline import session_summary, write_sizes_csv
+from app.pipeline import read_warnings, session_summary, source_description, write_sizes_csv
 from app.server.figures import false_link_times, truth_transform
 from app.server.scene import MapExtras, SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
-from cogmap_core.events import LinkToVertex, MapEvent, Odometry
+from cogmap_core.events import MapEvent, Odometry
 from cogmap_core.fileio import check_writable, output_error, write_text_atomic
 from cogmap_core.g2o import format_g2o
 from cogmap_core.slam import EventLog, SlamSession
@@ -63,18 +62,7 @@ def g2o_bytes(cmap: CognitiveMap) -> bytes:
 
 def truncated_log(log: EventLog, frames: int) -> EventLog:
     """A copy of the first ``frames`` frames of ``log``."""
-    frames = max(0, min(frames, log.frames))
-    end = log.frame_end[frames - 1] if frames else 0
-    events = list(log.events[:end])
-    links = sum(1 for e in events if isinstance(e, LinkToVertex))
-    truth = log.ground_truth[:frames] if log.has_ground_truth() else list(log.ground_truth)
-    return EventLog(
-        events=events,
-        frame_end=list(log.frame_end[:frames]),
-        frame_time=list(log.frame_time[:frames]),
-        ground_truth=list(truth),
-        link_robot_truth=list(log.link_robot_truth[:links]),
-    )
+    return log.truncated(frames)
 
 
 def view_session(replay: Replay) -> SlamSession:
@@ -83,7 +71,9 @@ def view_session(replay: Replay) -> SlamSession:
     Call with ``replay.lock`` held.
     """
     source = replay.session
-    view = SlamSession(source.params, replay.frontend_config, source.modes)
+    view = SlamSession(
+        source.params, replay.frontend_config, source.modes, evaluation=source.evaluation
+    )
     view.log = truncated_log(source.log, replay.cursor)
     view.maps.maps = dict(source.maps.maps)
     view.finished = replay.at_end
@@ -94,14 +84,15 @@ def summary_dict(replay: Replay) -> dict[str, object]:
     """``summary.json`` of the frames replayed so far (call with ``replay.lock`` held)."""
     view = view_session(replay)
     times = view.log.frame_time
-    first = times[0] if times else 0.0
-    last = times[-1] if times else 0.0
+    first = float(times[0]) if len(times) else 0.0
+    last = float(times[-1]) if len(times) else 0.0
     warnings: dict[str, object] = {}
+    source: dict[str, object] = {}
     if replay.reader is not None:
-        counters = replay.reader.counters
-        warnings = {k: v for k, v in asdict(counters).items() if k != "frames" and v}
+        warnings = read_warnings(replay.reader)
+        source = source_description(replay.reader)
     dataset = str(replay.bag_path) if replay.bag_path is not None else ""
-    return session_summary(view, dataset, first, last, replay.processing_s, warnings)
+    return session_summary(view, dataset, first, last, replay.processing_s, warnings, source=source)
 
 
 def summary_bytes(replay: Replay) -> bytes:

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap
-from cogmap_core.evaluation import LayoutFidelity, align_rigid_2d
+from cogmap_core.evaluation import EvaluationSettings, LayoutFidelity, align_rigid_2d
 from cogmap_core.slam import EventLog
 
 FloatArray = NDArray[np.float64]
@@ -47,14 +47,23 @@ def truth_transform(log: EventLog, cmap: CognitiveMap) -> tuple[float, float, fl
     return (-theta0, -(c * x0 - s * y0), -(s * x0 + c * y0))
 
 
-def map_figures(log: EventLog, cmap: CognitiveMap) -> MapFigures:
-    """ATE, layout fidelity and the truth's alignment of ``cmap``."""
-    return MapFigures(log.map_ate(cmap), log.layout_fidelity(cmap), truth_transform(log, cmap))
+def map_figures(
+    log: EventLog, cmap: CognitiveMap, judging: EvaluationSettings | None = None
+) -> MapFigures:
+    """ATE, layout fidelity (at ``judging``'s radius) and the truth's alignment of ``cmap``."""
+    radius = (judging or EvaluationSettings()).layout_radius
+    return MapFigures(
+        log.map_ate(cmap), log.layout_fidelity(cmap, radius), truth_transform(log, cmap)
+    )
 
 
-def false_link_times(log: EventLog) -> FloatArray:
-    """Times of the links the ground truth calls false (position 0.1 m, heading 10 degrees)."""
-    score = log.loop_closure_score()
+def false_link_times(log: EventLog, judging: EvaluationSettings | None = None) -> FloatArray:
+    """Times of the links the ground truth calls false (with ``judging``'s tolerances).
+
+    The default tolerances are a bag's: position 0.1 m, heading 10 degrees.
+    """
+    judging = judging or EvaluationSettings()
+    score = log.loop_closure_score(judging.loop_distance, judging.loop_heading)
     if score is None or not score.false_indices:
         return np.zeros(0)
     table = log.link_table()

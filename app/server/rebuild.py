@@ -43,8 +43,8 @@ from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.event_file import columns_to_events, events_to_columns
-from cogmap_core.events import LinkToVertex, MapEvent
+from cogmap_core.event_file import KIND_LINK
+from cogmap_core.events import MapEvent
 from cogmap_core.slam import EventLog
 
 #: Events applied between two checks for a newer request during a rebuild.
@@ -177,23 +177,12 @@ def _first_past(
 
 
 class ScheduleIndex:
-    """Event times and link positions of a log, kept up to date as the log grows."""
-
-    def __init__(self) -> None:
-        """Empty."""
-        self._times: list[float] = []
-        self._links: list[int] = []
-        self._log: EventLog | None = None
+    """Event times and link positions of a log (read from its columns, no copy kept)."""
 
     def arrays(self, log: EventLog) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-        """``times`` and ``link_index`` of ``log`` (appending what is new since the last call)."""
-        if log is not self._log or len(self._times) > len(log.events):
-            self._times, self._links, self._log = [], [], log
-        have = len(self._times)
-        new = log.events[have:]
-        self._times.extend(e.time for e in new)
-        self._links.extend(have + k for k, e in enumerate(new) if type(e) is LinkToVertex)
-        return np.asarray(self._times), np.asarray(self._links, dtype=np.int64)
+        """``times`` of every event of ``log`` and the indices of its links."""
+        columns = log.columns()
+        return columns["time"], np.flatnonzero(columns["kind"] == KIND_LINK)
 
 
 def same_schedule(
@@ -324,9 +313,7 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
             log = EventLog()
         elif kind == "append":
             _, columns, frame_end, frame_time = message
-            log.events.extend(columns_to_events(columns))
-            log.frame_end.extend(frame_end)
-            log.frame_time.extend(frame_time)
+            log.extend(columns, frame_end, frame_time)
         elif kind == "build":
             _, task_id, task = message
             started = time.perf_counter()
@@ -476,13 +463,13 @@ class ProcessBuilder:
         if worker.frames == frames:
             return
         end = log.frame_end[frames - 1] if frames else 0
-        columns = events_to_columns(log.events[worker.events : end])
+        columns = {name: column[worker.events : end] for name, column in log.columns(end).items()}
         worker.conn.send(
             (
                 "append",
                 columns,
-                list(log.frame_end[worker.frames : frames]),
-                list(log.frame_time[worker.frames : frames]),
+                np.array(log.frame_end[worker.frames : frames]),
+                np.array(log.frame_time[worker.frames : frames]),
             )
         )
         worker.events, worker.frames = end, frames

@@ -1,4 +1,8 @@
-"""The replay worker: one thread that owns the SLAM session and replays the bag through it.
+"""The replay worker: one thread that owns the SLAM session and replays the input through it.
+
+The input is a bag (camera frames through the front end) or a log of odometry and place
+recognition (steps with their events, :mod:`cogmap_core.sources`); it is opened with
+:func:`~cogmap_core.sources.detect.open_source` and replayed the same way.
 
 The worker reads frames at the playback speed and feeds them to a
 :class:`~cogmap_core.slam.SlamSession`. Every other thread (GUI callbacks of any number of clients)
@@ -17,14 +21,16 @@ the maps from another thread takes :attr:`Replay.lock`.
 
 from __future__ import annotations
 
+import array
 import bisect
+import copy
 import math
 import sys
 import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Protocol
@@ -40,12 +46,14 @@ from app.server.rebuild import (
 )
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagReader, BagTopics, open_bag
+from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError
-from cogmap_core.frames import Frame
+from cogmap_core.errors import CogmapError, ParameterError
+from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEndConfig
+from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, SlamSession
+from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
 
 GenerationProgress = Callable[[int, int], None]
 BagSource = Path | Callable[[GenerationProgress], Path]
@@ -86,6 +94,18 @@ def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:
     return any(getattr(old, name) != getattr(new, name) for name in PARAMS_USED[mode])
 
 
+def _label_params(maps: dict[MapMode, CognitiveMap], params: MapParams) -> None:
+    """Give maps taken from the cache the parameters they are adopted with.
+
+    A cached map was built with parameters that agree with ``params`` in every one it uses
+    (:data:`PARAMS_USED`) but may differ in the others; it must carry ``params`` so that later
+    changes compare against what is in force.
+    """
+    for cmap in maps.values():
+        if cmap.params != params:
+            cmap.set_params(params)
+
+
 class PlaybackState(StrEnum):
     """What the worker is doing."""
 
@@ -102,8 +122,8 @@ class ReplayListener(Protocol):
     def on_status(self, replay: Replay) -> None:
         """The playback state, message or position changed."""
 
-    def on_frame(self, replay: Replay, frame: Frame, view_template: int | None) -> None:
-        """A frame was replayed (its camera image and matched view template)."""
+    def on_frame(self, replay: Replay, frame: Frame | EventStep, view_template: int | None) -> None:
+        """A frame was replayed (its camera image and matched view template; a log's step)."""
 
     def on_maps(self, replay: Replay, modes: tuple[MapMode, ...], forced: bool) -> None:
         """The maps ``modes`` changed; ``forced``: show it now (not rate-limited)."""
@@ -144,11 +164,11 @@ _Interrupted = Abandoned
 
 
 class Replay:
-    """Replays one bag through a :class:`SlamSession` on a worker thread.
+    """Replays one bag or log through a :class:`SlamSession` on a worker thread.
 
     Args:
-        bag: the bag, or a function that produces it given a progress callback (the built-in
-            dataset, generated on first use).
+        bag: the bag or log, or a function that produces it given a progress callback (the
+            built-in dataset, generated on first use).
         listener: receives updates (on the worker thread).
         params: initial map parameters.
         frontend: front-end configuration, or a function of the bag giving it (default: the
@@ -160,6 +180,17 @@ class Replay:
         priority: maps rebuilt first after a parameter change (the displayed ones).
         builder: where maps are rebuilt (:mod:`app.server.rebuild`; default: this thread). The
             replay owns it and closes it when stopped.
+        fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
+        log: how to read a log (ignored for bags).
+        resume: a saved session and its metadata (:func:`~cogmap_core.session_file.load_session`)
+            to continue: its maps are shown at once and grow with the bag's frames, which follow
+            the session's data as if the bags were one. Restarting or seeking goes back no
+            further than the session's end. Bags only: a log with a session is refused.
+
+    Times: :attr:`frame_time`, :attr:`duration` and :meth:`seek` are positions in the bag;
+    the session's data time of bag time ``t`` is ``t +`` :attr:`time_offset` (0 unless
+    resuming), and :attr:`cursor` counts the session's frames (those of the resumed session
+    first, :attr:`base_frames` of them).
 
     """
 
@@ -175,9 +206,15 @@ class Replay:
         priority: tuple[MapMode, ...] = (MapMode.COMPACT,),
         topics: BagTopics | None = None,
         builder: Builder | None = None,
+        fmt: str | None = None,
+        log: LogOptions | None = None,
+        resume: tuple[SlamSession, SessionMeta] | None = None,
     ) -> None:
         """Set up the replay (nothing is read until :meth:`start`)."""
         self.bag_source = bag
+        self.format = fmt
+        self.log_options = log or LogOptions()
+        self.has_camera = True  # known once the input is open
         self.listener = listener
         self.frontend_source = frontend
         self.frontend_config: FrontEndConfig | None = (
@@ -201,20 +238,31 @@ class Replay:
         self._generation = 0  # bumped by every request that should interrupt a rebuild
         # worker-owned state (read by others under `lock`)
         self.session = SlamSession(self._target_params, self.frontend_config)
-        self.cursor = 0  # frames applied to the maps
+        self.resume_meta: SessionMeta | None = None
+        self._base_maps: dict[MapMode, CognitiveMap] = {}
+        if resume is not None:
+            self.session, self.resume_meta = resume
+            self.frontend_config = self.session.frontend.config
+            self._target_params = self.session.params
+            self._base_maps = {m: copy.deepcopy(c) for m, c in self.session.maps.maps.items()}
+        self._base_params = self.session.params
+        self.base_frames = self.session.log.frames  # frames of the resumed session
+        self.time_offset = 0.0  # session data time of the bag's time 0
+        self.cursor = self.base_frames  # frames applied to the maps
         self.at_end = False
         self.state = PlaybackState.LOADING
         self.message = "opening the bag"
         self.bag_path: Path | None = None
-        self.reader: BagReader | None = None
+        self.reader: Source | None = None
         self.duration = 0.0
         self.total_frames = 0
-        self.view_templates: list[int | None] = []
+        # per frame of the bag, the view template it matched (-1: none); 8 bytes a frame
+        self.view_templates = array.array("q")
         self.rebuilds: list[RebuildRecord] = []
         self.frame_time = math.nan  # data time of the last frame applied
         self.processing_s = 0.0  # wall time spent applying frames (front end + maps)
-        self._frames: Iterator[Frame] | None = None
-        self._next: Frame | None = None
+        self._frames: Iterator[Frame | EventStep] | None = None
+        self._next: Frame | EventStep | None = None
         self._anchor: tuple[float, float] | None = None  # (wall, data time)
         self._fast_forward_to: float | None = None
         self._busy = 0  # 1 while the worker handles a request or a frame
@@ -441,9 +489,22 @@ class Replay:
         try:
             path = self._resolve_bag()
             self.bag_path = path
-            reader = open_bag(path, topics=self.topics, image_scale=self.image_scale)
-            if self.session.log.frames == 0:  # the front end is chosen for the bag
-                self._choose_frontend(path)
+            fmt = resolve_format(path, self.format)
+            if self.resume_meta is not None and not KINDS[fmt].has_camera:
+                raise ParameterError(
+                    f"{path} is a log of odometry and place recognition ({fmt}): sessions are "
+                    "for bags; replay it without a session to resume"
+                )
+            reader = open_source(
+                path, fmt, topics=self.topics, image_scale=self.image_scale, log=self.log_options
+            )
+            self.has_camera = KINDS[fmt].has_camera
+            if self.session.log.frames == 0:  # the front end is chosen for the input
+                self._choose_frontend(path, fmt)
+            if self.resume_meta is not None and self.base_frames:
+                assert isinstance(reader, BagReader)
+                end = float(self.session.log.frame_time[self.base_frames - 1])
+                self.time_offset = self.resume_meta.resume_offset(reader.start_stamp, end)
         except CogmapError as exc:
             self._fail(str(exc))
             return
@@ -456,7 +517,7 @@ class Replay:
                 self.reader.close()
             self.reader = reader
             self.duration = reader.info.duration
-            self.total_frames = reader.info.frame_count
+            self.total_frames = self.base_frames + reader.info.frame_count
         self.message = ""
         self._start_pass(0.0)
         with self._cond:
@@ -464,9 +525,12 @@ class Replay:
         self._notify_status()
         self._notify_maps(ALL_MODES, True)
 
-    def _choose_frontend(self, path: Path) -> None:
+    def _choose_frontend(self, path: Path, fmt: str) -> None:
+        kind = KINDS[fmt]
         source = self.frontend_source
-        if isinstance(source, FrontEndConfig):
+        if not kind.has_camera:
+            config = None  # a log's events need no front end
+        elif isinstance(source, FrontEndConfig):
             config = source
         elif source is None:
             config = frontend_config_for(path)
@@ -474,7 +538,7 @@ class Replay:
             config = source(path)
         with self.lock:
             self.frontend_config = config
-            self.session = SlamSession(self._target_params, config)
+            self.session = SlamSession(self._target_params, config, evaluation=kind.evaluation)
             self._log_id += 1
             self.cache.clear()
             self.builder.reset()
@@ -492,7 +556,18 @@ class Replay:
         self._notify_status()
         return source(progress)
 
+    def _bag_time(self, data_time: float) -> float:
+        """Position in the bag of a session data time."""
+        return float(data_time) - self.time_offset
+
+    @property
+    def data_time(self) -> float:
+        """Session data time of the last frame applied (nan before any)."""
+        k = self.cursor
+        return float(self.session.log.frame_time[k - 1]) if k else math.nan
+
     def _start_pass(self, start_time: float) -> None:
+        """Read the bag from bag time ``start_time``."""
         self._close_pass()
         assert self.reader is not None
         self._frames = self.reader.frames(start_time)
@@ -507,7 +582,7 @@ class Replay:
             frames.close()  # type: ignore[attr-defined]
 
     # ------------------------------------------------------------------ playback
-    def _peek(self) -> Frame | None:
+    def _peek(self) -> Frame | EventStep | None:
         if self._next is None and self._frames is not None:
             self._next = next(self._frames, None)
         return self._next
@@ -544,10 +619,12 @@ class Replay:
         self._notify_maps(ALL_MODES, forced)
         self._notify_status()
 
-    def _apply_frame(self, frame: Frame) -> None:
+    def _apply_frame(self, frame: Frame | EventStep) -> None:
         session = self.session
         log = session.log
         started = time.perf_counter()
+        if self.time_offset:
+            frame = replace(frame, time=frame.time + self.time_offset)
         with self.lock:
             k = self.cursor
             if k < log.frames:
@@ -560,13 +637,14 @@ class Replay:
                 lo = log.frame_end[k - 1] if k else 0
                 for event in log.events[lo : log.frame_end[k]]:
                     session.maps.apply(event)
-                view = self.view_templates[k]
+                matched = self.view_templates[k - self.base_frames]
+                view = None if matched < 0 else matched
             else:
                 out = session.process(frame)
-                self.view_templates.append(out.view_template)
+                self.view_templates.append(-1 if out.view_template is None else out.view_template)
                 view = out.view_template
             self.cursor = k + 1
-            self.frame_time = frame.time
+            self.frame_time = self._bag_time(frame.time)
             self.processing_s += time.perf_counter() - started
         try:
             self.listener.on_frame(self, frame, view)
@@ -580,7 +658,7 @@ class Replay:
             if self.cursor == session.log.frames:
                 session.finish()
             elif self.cursor:
-                session.maps.finish(session.log.frame_time[self.cursor - 1])
+                session.maps.finish(float(session.log.frame_time[self.cursor - 1]))
             self.at_end = True
             self.processing_s += time.perf_counter() - started
         self._close_pass()
@@ -617,10 +695,11 @@ class Replay:
             with self._cond:
                 self.state = PlaybackState.LOADING
         log = self.session.log
-        cached_end = log.frame_time[-1] if log.frames else -math.inf
+        cached_end = self._bag_time(log.frame_time[-1]) if log.frames else -math.inf
         try:
             if target <= cached_end or self.session.finished:
-                self._seek_to_frame(bisect.bisect_right(log.frame_time, target))
+                k = bisect.bisect_right(log.frame_time, target + self.time_offset)
+                self._seek_to_frame(k)
             else:
                 # Beyond what the front end has seen: replay the cache to its end, then run the
                 # front end as fast as possible up to the target.
@@ -641,15 +720,20 @@ class Replay:
             params = self._target_params
             self._params_request = None
         log = self.session.log
-        k = max(0, min(k, log.frames))
+        base = self.base_frames
+        k = max(base, min(k, log.frames))
         maps: dict[MapMode, CognitiveMap] = {}
         tasks = []
-        for mode in self._order():
-            cached = self.cache.take(self.cache.key(mode, params, k, False, self._log_id))
-            if cached is not None:
-                maps[mode] = cached
-            else:
-                tasks.append(BuildTask(mode, params, k, False))
+        if k == base and self._base_maps and params == self._base_params:
+            # back to the resumed state: the session's own maps (nothing to rebuild)
+            maps = {mode: copy.deepcopy(cmap) for mode, cmap in self._base_maps.items()}
+        else:
+            for mode in self._order():
+                cached = self.cache.take(self.cache.key(mode, params, k, False, self._log_id))
+                if cached is not None:
+                    maps[mode] = cached
+                else:
+                    tasks.append(BuildTask(mode, params, k, False))
         try:
             for built in self.builder.build(log, tasks, lambda: self._generation != generation):
                 maps[built.task.mode] = built.cmap
@@ -659,18 +743,24 @@ class Replay:
             raise
         with self.lock:
             self._keep_replaced(maps)
+            _label_params(maps, params)
             self.session.adopt(params, maps)
             self.session.finished = False
-            if k == 0:
+            if k == base:
                 self.processing_s = 0.0
             self.cursor = k
             self.at_end = False
-            self.frame_time = log.frame_time[k - 1] if k else math.nan
+            self.frame_time = self._bag_time(log.frame_time[k - 1]) if k > base else math.nan
         if self.state is not PlaybackState.ERROR:
             if k < log.frames:
-                self._start_pass(max(0.0, log.frame_time[k] - 1e-3) if k else 0.0)
+                start = max(0.0, self._bag_time(log.frame_time[k]) - 1e-3) if k > base else 0.0
             else:
-                self._start_pass(min(log.frame_time[k - 1] + 1e-4, self.duration) if k else 0.0)
+                start = (
+                    min(self._bag_time(log.frame_time[k - 1]) + 1e-4, self.duration)
+                    if k > base
+                    else 0.0
+                )
+            self._start_pass(start)
         with self._cond:
             if self.state is PlaybackState.LOADING:
                 self.state = PlaybackState.PAUSED
@@ -746,6 +836,7 @@ class Replay:
         record.compute_s[mode] = compute_s
         with self.lock:
             self._keep_replaced({mode: cmap})
+            _label_params({mode: cmap}, params)
             self.session.adopt(params, {mode: cmap})
         self._notify_maps((mode,), True)
         record.published[mode] = time.perf_counter()

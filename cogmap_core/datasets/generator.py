@@ -12,6 +12,7 @@ rendering give identical bags.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import multiprocessing
 import multiprocessing.connection
@@ -21,6 +22,7 @@ import sys
 import threading
 import time
 import types
+from collections import deque
 from collections.abc import Callable, Generator, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -53,6 +55,7 @@ _CAMERA_OFFSET = 0.0113  # s: camera, odometry and overhead clocks are not in ph
 _GROUND_TRUTH_OFFSET = 0.0051
 _CHUNK = 24  # frames per rendering task
 _MIN_FRAMES_PER_WORKER = 1500
+_IN_FLIGHT = 4  # chunks per worker rendered ahead of the writer
 
 
 @dataclass(frozen=True)
@@ -350,13 +353,23 @@ def render_frames(
             return
         ctx = multiprocessing.get_context("spawn")
         init = (plan.layout.text, plan.layout.name, plan.layout.cell, camera, settings)
-        with _neutral_main():  # workers start during construction and submission
+        queue = iter(tasks)
+        # At most _IN_FLIGHT chunks per worker are rendered ahead of the writer, so memory stays
+        # flat however long the run and however slow the disk.
+        with _neutral_main():  # workers start during construction and the first submissions
             pool = ProcessPoolExecutor(
                 used, mp_context=ctx, initializer=_init_worker, initargs=init
             )
-            chunks = pool.map(_render_chunk, tasks)
+            ahead = deque(
+                pool.submit(_render_chunk, task)
+                for task in itertools.islice(queue, _IN_FLIGHT * used)
+            )
         try:
-            for chunk in chunks:
+            while ahead:
+                chunk = ahead.popleft().result()
+                task = next(queue, None)
+                if task is not None:
+                    ahead.append(pool.submit(_render_chunk, task))
                 yield from chunk
                 done += len(chunk)
                 if progress:

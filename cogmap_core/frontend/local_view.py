@@ -15,12 +15,21 @@ Fast matching. An exhaustive search costs ``T * n_offsets * X' * Y`` absolute di
 fast matcher only needs the best pair *if it is a match*, so every pair whose SAD provably exceeds
 the bound ``B`` (the threshold, tightened by the SAD of the previous frame's template) is dropped
 without computing it. The proof is the triangle inequality: for any partition of the compared
-pixels into blocks, ``sum_blocks |sum_block(view) - sum_block(template)| <= SAD``. Three
-partitions are precomputed for every (template, offset) pair when the template is stored: the
-whole window (level 0), 2x4 blocks (level 1) and 4x4-pixel blocks (level 2). Level 0 is an index
-sorted by window sum (a binary search finds the pairs within ``B``); each further level drops
-pairs whose bound exceeds ``B``, and the survivors get their exact SAD. A pair with
-``SAD <= B`` survives every level, so the result is exactly the exhaustive search's.
+pixels into blocks, ``sum_blocks |sum_block(view) - sum_block(template)| <= SAD``, and so
+for any signs ``s_b = +-1``, ``|sum_b s_b (view_b - template_b)| <= SAD``. Two partitions are
+precomputed for every (template, offset) pair when the template is stored: 2x4 blocks (level 1)
+and 4x4-pixel blocks (level 2). Level 0 is one signed combination of the level-1 block sums,
+the *key*: an index sorted by key finds the pairs within ``B`` of the view's key by binary
+search; each further level drops pairs whose bound exceeds ``B``, and the survivors get their
+exact SAD. A pair with ``SAD <= B`` survives every level, so the result is exactly the
+exhaustive search's.
+
+The key's signs are chosen, each time the index is rebuilt, as the combination whose values
+spread most over the stored pairs (largest standard deviation): the fewer pairs share the
+view's key, the fewer pass level 0. With brightness normalisation every template has about the
+same total, so the plain window sum would let most pairs through; the left-right difference
+(what the data usually picks) lets through about a third as many. The choice only affects
+speed, never the result.
 
 OpenRatSLAM also skips templates whose mean differs from the view's by more than the threshold plus
 0.005; that heuristic can reject a true match (the mean covers all columns, the comparison does not)
@@ -102,9 +111,10 @@ def _block_matrix(n: int, block: int, dtype: type[np.floating[Any]]) -> NDArray[
 class LocalViewCells:
     """The collection of visual templates and the matcher (OpenRatSLAM's ``LocalViewMatch``).
 
-    Index for the pruned search. Level 0 is the window sum of each (template, offset) pair; the
-    pairs of all templates but the newest few are kept sorted by it, so the pairs within ``B`` of
-    the view's sum are one contiguous slice found by binary search. Their level-1 descriptors (sums
+    Index for the pruned search. Level 0 is the key of each (template, offset) pair (a signed
+    sum of its level-1 block sums, module doc); the pairs of all templates but the newest few are
+    kept sorted by it, so the pairs within ``B`` of the view's key are one contiguous slice found
+    by binary search. Their level-1 descriptors (sums
     of 2x4 blocks) are stored in the same order, column-major, so the level-1 bound of the slice
     is a few contiguous passes. The newest templates (fewer than ``max(64, count / 16)``) are
     scanned directly; when there are more, the sorted arrays are rebuilt. Survivors then face the
@@ -140,7 +150,8 @@ class LocalViewCells:
         self._count = 0
         self._capacity = 0
         self._templates = np.zeros((0, self._y, self._x), dtype=np.int16)
-        self._sums = np.zeros((0, self._n_off), dtype=np.int32)
+        self._keys_all = np.zeros((0, self._n_off), dtype=np.int32)  # level-0 key of each pair
+        self._signs = _key_candidates(self._l1[0].shape[0], self._l1[1].shape[1])[0]
         self._desc1 = np.zeros((0, self._n_off, self._k1), dtype=dt)
         self._desc2 = np.zeros((0, self._n_off, self._k2), dtype=dt)
         self._grow(_INITIAL_CAPACITY)
@@ -207,9 +218,9 @@ class LocalViewCells:
         self._templates[index] = tmpl
         windows = np.stack([tmpl[:, o : o + self._width] for o in self._offsets])
         windows = windows.astype(self._dtype)
-        self._sums[index] = windows.sum(axis=(1, 2), dtype=np.float64).astype(np.int32)
         self._desc1[index] = (self._l1[0] @ windows @ self._l1[1]).reshape(self._n_off, -1)
         self._desc2[index] = (self._l2[0] @ windows @ self._l2[1]).reshape(self._n_off, -1)
+        self._keys_all[index] = self._key_of(self._desc1[index])
         self._count += 1
         if self._count - self._indexed > max(64, self._count // 16):
             self._rebuild_index()
@@ -232,7 +243,7 @@ class LocalViewCells:
             return b
 
         self._templates = grown(self._templates)
-        self._sums = grown(self._sums)
+        self._keys_all = grown(self._keys_all)
         self._desc1 = grown(self._desc1)
         self._desc2 = grown(self._desc2)
         # (capacity, Y, n_offsets, width) view of every shifted window, no copy.
@@ -241,10 +252,21 @@ class LocalViewCells:
         self._windows = windows[:, :, 0 : last : self.config.vt_step_match, :]  # a view, no copy
         self._capacity = capacity
 
+    def _key_of(self, desc1: NDArray[Any]) -> NDArray[np.int32]:
+        """Level-0 keys of level-1 descriptors ``(..., k1)`` (exact integers)."""
+        return np.rint(desc1.astype(np.float64) @ self._signs).astype(np.int32)
+
     def _rebuild_index(self) -> None:
-        """Sort the pairs of all templates by window sum (level 0) for binary search."""
+        """Choose the key's signs, then sort the pairs of all templates by key for search."""
         n = self._count
-        keys = self._sums[:n].ravel()
+        desc1 = self._desc1[:n].reshape(-1, self._k1).astype(np.float64)
+        candidates = _key_candidates(self._l1[0].shape[0], self._l1[1].shape[1])
+        spread = (desc1 @ candidates.T).std(axis=0)
+        signs = candidates[int(np.argmax(spread))]  # first of the widest: deterministic
+        if not np.array_equal(signs, self._signs):
+            self._signs = signs
+            self._keys_all[:n] = self._key_of(self._desc1[:n])
+        keys = self._keys_all[:n].ravel()
         order = np.argsort(keys, kind="stable")
         self._keys = keys[order]
         self._ids = order
@@ -272,8 +294,8 @@ class LocalViewCells:
             evaluated += len(sads)
             bound = min(bound, int(sads.min()))
         fc = centre.astype(self._dtype)
-        v0 = int(centre.sum(dtype=np.int64))
         v1 = (self._l1[0] @ fc @ self._l1[1]).ravel()
+        v0 = int(self._key_of(v1))
         found: list[NDArray[np.intp]] = []
         if self._indexed:
             query = self._query
@@ -286,7 +308,7 @@ class LocalViewCells:
                 found.append(self._ids[lo:hi][self._ones1 @ d <= bound])
         if count > self._indexed:
             first = self._indexed * n_off
-            recent = np.abs(self._sums[self._indexed : count].ravel() - v0)
+            recent = np.abs(self._keys_all[self._indexed : count].ravel() - v0)
             flat = np.flatnonzero(recent <= bound) + first
             if len(flat):
                 d = self._desc1.reshape(-1, self._k1)[flat] - v1
@@ -421,6 +443,24 @@ class _AreaPlan:
             cells *= self.inv_area
         # Means of 8-bit values lie in [0, 255] up to rounding error far below 0.5: no clipping.
         return np.rint(cells, out=cells).astype(np.uint8)
+
+
+def _key_candidates(row_blocks: int, col_blocks: int) -> NDArray[np.float64]:
+    """Sign vectors a level-0 key may use over ``row_blocks x col_blocks`` level-1 blocks.
+
+    The first is all ``+1`` (the window sum). With at most 12 blocks, every sign vector whose
+    first sign is ``+1`` (a key and its negative prune alike); with more, the window sum and the
+    left-right and top-bottom differences.
+    """
+    k = row_blocks * col_blocks
+    if k <= 12:
+        signs = 1 - 2 * ((np.arange(2 ** (k - 1))[:, None] >> np.arange(k - 1)[::-1]) & 1)
+        return np.hstack([np.ones((signs.shape[0], 1)), signs]).astype(np.float64)
+    cols = np.arange(k) % col_blocks
+    rows = np.arange(k) // col_blocks
+    left_right = np.where(cols < col_blocks // 2, 1.0, -1.0)
+    top_bottom = np.where(rows < row_blocks // 2, 1.0, -1.0)
+    return np.stack([np.ones(k), left_right, top_bottom])
 
 
 def _area_weights(edges: NDArray[np.float64], n_in: int) -> NDArray[np.float64]:

@@ -1,0 +1,373 @@
+"""Long-term mapping: one pass over a long generated bag, every cost and size printed per lap.
+
+The paper's claim is long-term mapping: "the size of the map does not grow unless the unknown
+environment is explored". This runs the whole pipeline once over a long bag (by default 60 laps of
+the default layout: ``cogmap make-maze BAG --laps 60``) -- reading and JPEG decoding, the front
+end, the event log, the three maps with their optimisations -- and prints per lap:
+
+- vertices and edges of each map, view templates;
+- ms per frame of reading, of the front end, of the event log and of each map (including its
+  optimisations, whose share is printed too);
+- layout completeness / correctness of the compact map at 8 cm (evaluation, not timed);
+- the process's resident memory;
+
+then the totals, the size change of each map over laps 3-N (raw and with ground first explored in
+those laps set apart), the time to save the whole session and to load it again, and the targets.
+It writes ``long_term.png``: sizes per map over time (left) and per-lap cost per stage (right).
+
+Targets (issue "Long-term mapping", 60 laps): compact vertices change laps 3-60 within +-3 % and
+completeness / correctness >= 0.98 at lap 60; front end ms per frame lap 60 <= 1.3 x lap 6's;
+compact map ms per frame lap 60 <= 1.3 x lap 6's; whole run >= 50x real time; peak RSS <= 1 GB;
+saving and resuming the session <= 5 s each.
+
+Usage: ``python benchmarks/long_term.py BAG [--laps 60] [--layout irat_australia] [--seed 1]
+[--out DIR]`` (the lap times come from the generator's plan of that layout, laps and seed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import resource
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from app.plots import BLACK, FONT, MAP_COLORS, Panel, save_png
+from cogmap_core.cognitive_map import MapMode
+from cogmap_core.datasets import open_bag
+from cogmap_core.datasets.generator import MazeConfig, plan_dataset
+from cogmap_core.datasets.profile import frontend_config_for
+from cogmap_core.evaluation import LAYOUT_RADIUS
+from cogmap_core.session_file import SessionMeta, load_session, save_session
+from cogmap_core.slam import SlamSession
+
+MODES = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+SHORT = {MapMode.STANDARD: "std", MapMode.SCENE_INTEGRATION: "si", MapMode.COMPACT: "cmp"}
+STAGES = ("read", "frontend", "log", *(m.value for m in MODES))
+STAGE_COLORS = {
+    "read": (150, 150, 150),
+    "frontend": (40, 160, 40),
+    "log": (160, 40, 160),
+    **MAP_COLORS,
+}
+
+
+def rss_mb() -> float:
+    """Current resident set size of this process (MB)."""
+    try:
+        with open("/proc/self/status") as handle:
+            for line in handle:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return peak_rss_mb()
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process so far (MB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+@dataclass
+class Lap:
+    """What one lap cost and left behind."""
+
+    lap: int
+    frames: int
+    data_s: float
+    seconds: dict[str, float]
+    optimise_s: dict[MapMode, float]
+    vertices: dict[MapMode, int]
+    edges: dict[MapMode, int]
+    templates: int
+    completeness: float
+    correctness: float
+    rss: float
+
+    def ms(self, stage: str) -> float:
+        """Milliseconds per frame of a stage in this lap."""
+        return 1e3 * self.seconds[stage] / max(self.frames, 1)
+
+
+@dataclass
+class Run:
+    """A timed pass over the bag."""
+
+    session: SlamSession
+    laps: list[Lap] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=lambda: dict.fromkeys(STAGES, 0.0))
+    finish_s: float = 0.0
+    save_s: float = math.nan
+    load_s: float = math.nan
+    session_bytes: int = 0
+    first: float = math.nan
+    last: float = math.nan
+
+
+def timed_pass(bag: Path, lap_times: tuple[float, ...]) -> Run:
+    """Process every frame (the steps of ``SlamSession.process``, timed one by one)."""
+    session = SlamSession(frontend_config=frontend_config_for(bag))
+    run = Run(session)
+    lap_seconds = dict.fromkeys(STAGES, 0.0)
+    lap_frames = 0
+    lap_start = 0.0
+    opt_before = dict.fromkeys(MODES, 0.0)
+    maps = [(mode.value, session.maps[mode]) for mode in MODES]
+    clock = time.perf_counter
+    laps = len(lap_times) - 1
+    with open_bag(bag, image_scale=4) as reader:
+        frames = reader.frames()
+        epoch = reader.start_stamp
+        while True:
+            t0 = clock()
+            frame = next(frames, None)
+            t1 = clock()
+            lap_seconds["read"] += t1 - t0
+            boundary = len(run.laps) + 1
+            if frame is None or (boundary < laps and frame.time >= lap_times[boundary]):
+                _close_lap(run, lap_seconds, lap_frames, lap_start, opt_before, frame)
+                lap_seconds = dict.fromkeys(STAGES, 0.0)
+                lap_frames = 0
+                lap_start = frame.time if frame is not None else lap_start
+                if frame is None:
+                    break
+            if math.isnan(run.first):
+                run.first = frame.time
+            run.last = frame.time
+            t0 = clock()
+            events = session.frontend.process(frame)
+            t1 = clock()
+            truth = frame.ground_truth
+            session.log.append_frame(
+                events,
+                frame.time,
+                None if truth is None else (float(truth[0]), float(truth[1]), float(truth[2])),
+            )
+            t2 = clock()
+            lap_seconds["frontend"] += t1 - t0
+            lap_seconds["log"] += t2 - t1
+            for name, cmap in maps:
+                t0 = clock()
+                for event in events:
+                    cmap.apply(event)
+                lap_seconds[name] += clock() - t0
+            lap_frames += 1
+    # the session as cogmap run --save-session saves it: before the final optimisation
+    with tempfile.TemporaryDirectory(prefix="cogmap-long-term-") as tmp:
+        path = Path(tmp) / "session.npz"
+        t0 = clock()
+        save_session(path, session, SessionMeta(epoch=epoch, bags=[{"bag": str(bag)}]))
+        run.save_s = clock() - t0
+        run.session_bytes = path.stat().st_size
+        t0 = clock()
+        load_session(path)
+        run.load_s = clock() - t0
+    t0 = clock()
+    session.finish()
+    run.finish_s = clock() - t0
+    return run
+
+
+def _close_lap(
+    run: Run,
+    seconds: dict[str, float],
+    frames: int,
+    start: float,
+    opt_before: dict[MapMode, float],
+    frame: object,
+) -> None:
+    session = run.session
+    for stage, value in seconds.items():
+        run.seconds[stage] += value
+    optimise = {}
+    for mode in MODES:
+        total = sum(o.wall_s for o in session.maps[mode].optimizations)
+        optimise[mode] = total - opt_before[mode]
+        opt_before[mode] = total
+    compact = session.maps[MapMode.COMPACT]
+    fidelity = session.layout_fidelity(compact, LAYOUT_RADIUS)
+    end = run.last
+    lap = Lap(
+        lap=len(run.laps) + 1,
+        frames=frames,
+        data_s=end - start,
+        seconds=dict(seconds),
+        optimise_s=optimise,
+        vertices={m: session.maps[m].num_vertices for m in MODES},
+        edges={m: session.maps[m].num_edges for m in MODES},
+        templates=session.frontend.template_count,
+        completeness=math.nan if fidelity is None else fidelity.completeness,
+        correctness=math.nan if fidelity is None else fidelity.correctness,
+        rss=rss_mb(),
+    )
+    run.laps.append(lap)
+    print(_lap_line(lap), flush=True)
+
+
+def _header() -> str:
+    sizes = " ".join(f"{SHORT[m] + ' V/E':>11}" for m in MODES)
+    costs = " ".join(f"{SHORT[m] + ' (opt)':>13}" for m in MODES)
+    return (
+        f"{'lap':>3} {'frames':>6} {sizes} {'tmpl':>5} | ms/frame: {'read':>5} {'front':>5} "
+        f"{'log':>5} {costs} | {'compl':>6} {'corr':>6} {'RSS MB':>7}"
+    )
+
+
+def _lap_line(lap: Lap) -> str:
+    sizes = " ".join(f"{lap.vertices[m]:>5d}/{lap.edges[m]:<5d}" for m in MODES)
+    costs = " ".join(
+        f"{lap.ms(m.value):6.3f} ({1e3 * lap.optimise_s[m] / max(lap.frames, 1):5.3f})"
+        for m in MODES
+    )
+    return (
+        f"{lap.lap:3d} {lap.frames:6d} {sizes} {lap.templates:5d} | ms/frame: "
+        f"{lap.ms('read'):5.3f} {lap.ms('frontend'):5.3f} {lap.ms('log'):5.3f} {costs} | "
+        f"{lap.completeness:6.3f} {lap.correctness:6.3f} {lap.rss:7.0f}"
+    )
+
+
+def figure(run: Run, lap_times: tuple[float, ...]) -> np.ndarray:
+    """Sizes per map over time (left) and per-lap ms per frame of each stage (right)."""
+    width, height = 1300, 520
+    img = np.full((height, width, 3), 255, np.uint8)
+    histories = {m: run.session.maps[m].size_history() for m in MODES}
+    end = run.last
+    top = max(int(v.max()) if v.size else 1 for _, v, _ in histories.values())
+    sizes = Panel(img, 80, 50, 520, 360, (0.0, end / 3600.0), (0.0, top * 1.05))
+    sizes.axes("data time (h)", "V", "vertices per map over time")
+    for mode, (t, v, _) in histories.items():
+        if t.size:
+            x = np.r_[np.repeat(t, 2)[1:], end] / 3600.0
+            sizes.polyline(x, np.repeat(v, 2).astype(float), MAP_COLORS[mode.value])
+    laps = np.array([lap.lap for lap in run.laps], dtype=float)
+    peak = max(lap.ms(s) for lap in run.laps for s in STAGES)
+    cost = Panel(img, 720, 50, 520, 360, (0.5, laps[-1] + 0.5), (0.0, peak * 1.1))
+    cost.axes("lap", "ms", "per-lap cost per stage (ms per frame)")
+    for stage in STAGES:
+        cost.polyline(laps, np.array([lap.ms(stage) for lap in run.laps]), STAGE_COLORS[stage])
+    for k, stage in enumerate(STAGES):
+        x, y = 80 + k * 200, height - 40
+        cv2.line(img, (x, y), (x + 30, y), STAGE_COLORS[stage], 3)
+        cv2.putText(img, stage, (x + 36, y + 5), FONT, 0.45, BLACK, 1)
+    cv2.putText(
+        img,
+        f"{len(lap_times) - 1} laps, {run.session.log.frames} frames, {end / 3600:.2f} h of data",
+        (80, height - 10),
+        FONT,
+        0.45,
+        BLACK,
+        1,
+    )
+    return img
+
+
+def main() -> int:
+    """Run the benchmark; exit code 0 when every target is met."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("bag", type=Path, help="a generated bag (cogmap make-maze BAG --laps N)")
+    parser.add_argument("--laps", type=int, default=60, help="laps the bag was made with")
+    parser.add_argument("--layout", default="irat_australia", help="its layout")
+    parser.add_argument("--seed", type=int, default=1, help="its seed")
+    parser.add_argument("--out", type=Path, default=Path("."), help="folder for long_term.png")
+    args = parser.parse_args()
+    plan = plan_dataset(MazeConfig(layout=args.layout, laps=args.laps, seed=args.seed))
+    lap_times = plan.trajectory.lap_times
+    with open_bag(args.bag) as reader:
+        if reader.info.frame_count != plan.frame_times.size:
+            print(
+                f"{args.bag} has {reader.info.frame_count} frames, the plan of {args.layout} "
+                f"with {args.laps} laps and seed {args.seed} has {plan.frame_times.size}; give "
+                "the settings the bag was made with",
+                file=sys.stderr,
+            )
+            return 2
+    print(f"{args.bag}: {args.laps} laps, {plan.frame_times.size} frames, {lap_times[-1]:.0f} s")
+    print(_header())
+    started = time.perf_counter()
+    run = timed_pass(args.bag, lap_times)
+    wall_all = time.perf_counter() - started
+    log = run.session.log
+    duration = run.last - run.first
+    pipeline_s = sum(run.seconds.values()) + run.finish_s
+    print(
+        f"total {log.frames} frames, {duration:.0f} s of data: "
+        + ", ".join(f"{s} {run.seconds[s]:.1f} s" for s in STAGES)
+        + f", final optimisation {run.finish_s:.2f} s; pipeline {pipeline_s:.1f} s "
+        f"({duration / pipeline_s:.1f}x real time; with evaluation and session timing "
+        f"{wall_all:.0f} s); peak RSS {peak_rss_mb():.0f} MB"
+    )
+    laps = len(lap_times) - 1
+    first_lap = min(3, laps)
+    changes = {}
+    for mode in MODES:
+        cmap = run.session.maps[mode]
+        change = log.size_change(cmap, lap_times[first_lap], lap_times[laps], LAYOUT_RADIUS)
+        fidelity = log.layout_fidelity(cmap, LAYOUT_RADIUS)
+        assert change is not None and fidelity is not None
+        changes[mode] = change
+        optimise_s = sum(o.wall_s for o in cmap.optimizations)
+        print(
+            f"  {mode.value:18} V {cmap.num_vertices:5d} E {cmap.num_edges:5d}; end of lap "
+            f"{first_lap} to {laps}: {change.start_vertices} -> {change.end_vertices} vertices, "
+            f"{change.change:+.1%} ({change.change_without_exploration:+.1%} without the "
+            f"{change.exploration_vertices} made on ground first explored then); completeness "
+            f"{fidelity.completeness:.4f}, correctness {fidelity.correctness:.4f}; "
+            f"{len(cmap.optimizations)} optimisations, {optimise_s:.1f} s"
+        )
+    print(
+        f"session: saved in {run.save_s:.2f} s, loaded in {run.load_s:.2f} s, "
+        f"{run.session_bytes / 1e6:.1f} MB ({run.session.frontend.template_count} templates, "
+        f"{log.event_count} events)"
+    )
+    for k in sorted({6, (laps + 1) // 2, 30, laps} & set(range(1, laps + 1))):
+        print("  " + _lap_line(run.laps[k - 1]))
+    args.out.mkdir(parents=True, exist_ok=True)
+    save_png(figure(run, lap_times), args.out / "long_term.png")
+    print(f"wrote {args.out / 'long_term.png'}")
+
+    compact = run.session.maps[MapMode.COMPACT]
+    fidelity = log.layout_fidelity(compact, LAYOUT_RADIUS)
+    assert fidelity is not None
+    ref = run.laps[min(6, laps) - 1]
+    last = run.laps[-1]
+    fe_ratio = last.ms("frontend") / ref.ms("frontend")
+    cmp_ratio = last.ms("compact") / ref.ms("compact")
+    realtime = duration / pipeline_s
+    peak = peak_rss_mb()
+    change = changes[MapMode.COMPACT]
+    checks = [
+        (
+            f"compact vertices change laps {first_lap}-{laps} within +-3 % (raw "
+            f"{change.change:+.1%}, without exploration {change.change_without_exploration:+.1%})",
+            abs(change.change) <= 0.03,
+        ),
+        (
+            f"compact completeness, correctness >= 0.98 at lap {laps} "
+            f"({fidelity.completeness:.4f}, {fidelity.correctness:.4f})",
+            min(fidelity.completeness, fidelity.correctness) >= 0.98,
+        ),
+        (f"front end ms/frame lap {laps} <= 1.3 x lap {ref.lap} ({fe_ratio:.2f})", fe_ratio <= 1.3),
+        (f"compact ms/frame lap {laps} <= 1.3 x lap {ref.lap} ({cmp_ratio:.2f})", cmp_ratio <= 1.3),
+        (f"whole run >= 50x real time ({realtime:.1f}x)", realtime >= 50),
+        (f"peak RSS <= 1 GB ({peak:.0f} MB)", peak <= 1024),
+        (f"session save <= 5 s ({run.save_s:.2f} s)", run.save_s <= 5),
+        (f"session load <= 5 s ({run.load_s:.2f} s)", run.load_s <= 5),
+    ]
+    for label, ok in checks:
+        print(f"  {'OK    ' if ok else 'MISSED'} {label}")
+    print(
+        f"long-term: compact change laps {first_lap}-{laps} {change.change:+.1%}, front end "
+        f"lap{laps}/lap{ref.lap} {fe_ratio:.2f}, realtime {realtime:.1f}x, peak RSS {peak:.0f} MB"
+    )
+    return 0 if all(ok for _, ok in checks) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

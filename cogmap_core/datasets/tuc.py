@@ -1,0 +1,169 @@
+"""Reader of the TUC SLAM dataset's text format (Neubert, Schubert & Protzel, RA-L 2019).
+
+One measurement per line, whitespace separated, the first word naming its type:
+
+- ``odom2 time vx vy yaw_rate cov_vx cov_vy cov_yaw_rate`` -- 2-D wheel odometry;
+- ``loop time matched_time score`` -- a place-recognition loop candidate, score in [0, 1];
+- in the ground-truth file: ``point2 time x y c c c c`` (positions) and, where present,
+  ``angle time theta c`` (headings).
+
+``X_Input.txt`` comes with ``X_GT.txt`` beside it; that file is read as the ground truth unless
+another one is given. Covariances and ``vy`` are read but not used (the map's motion model has
+no lateral velocity). Every malformed line is an error naming file and line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from cogmap_core.errors import InputFileError
+from cogmap_core.sources.odometry_log import (
+    LOOP_COLUMNS,
+    ODOMETRY_COLUMNS,
+    TRUTH_COLUMNS,
+    LogFormatError,
+    OdometryLog,
+    Rows,
+    make_odometry_log,
+)
+
+#: The first word of a line -> how many numbers follow it.
+INPUT_FIELDS = {"odom2": 7, "loop": 3}
+TRUTH_FIELDS = {"point2": 7, "angle": 3}
+
+
+def looks_like_tuc(first_words: list[str]) -> bool:
+    """Whether the first words of a file's lines are TUC measurement types."""
+    return bool(first_words) and all(w in INPUT_FIELDS or w in TRUTH_FIELDS for w in first_words)
+
+
+def ground_truth_companion(path: Path) -> Path | None:
+    """``X_GT.txt`` beside ``X_Input.txt`` when it exists."""
+    name = path.name
+    if not name.endswith("_Input.txt"):
+        return None
+    candidate = path.with_name(name[: -len("_Input.txt")] + "_GT.txt")
+    return candidate if candidate.is_file() else None
+
+
+def _numbers(path: Path, line_no: int, words: list[str], expected: int) -> list[float]:
+    kind = words[0]
+    if len(words) - 1 != expected:
+        raise LogFormatError(
+            f"{path}:{line_no}: each '{kind}' line has {expected} numbers after the type, this one "
+            f"{len(words) - 1}; fix or drop the line"
+        )
+    try:
+        return [float(w) for w in words[1:]]
+    except ValueError:
+        bad = next(w for w in words[1:] if not _is_float(w))
+        raise LogFormatError(
+            f"{path}:{line_no}: {bad!r} in a '{kind}' line is not a number; fix or drop the line"
+        ) from None
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _lines(path: Path) -> list[tuple[int, list[str]]]:
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise LogFormatError(f"{path}: not a text file; expected TUC measurement lines") from None
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
+    out = []
+    for line_no, line in enumerate(text.splitlines(), start=1):
+        words = line.split()
+        if words and not words[0].startswith("#"):
+            out.append((line_no, words))
+    return out
+
+
+def read_tuc(
+    path: str | Path, ground_truth: str | Path | None = None, use_ground_truth: bool = True
+) -> OdometryLog:
+    """Read a TUC input file (``odom2`` and ``loop`` lines) and its ground truth.
+
+    Args:
+        path: the input file.
+        ground_truth: the ground-truth file (default: ``X_GT.txt`` beside ``X_Input.txt``).
+        use_ground_truth: False reads no ground truth at all.
+
+    Raises:
+        LogFormatError: a malformed line, or values breaking the log's rules (file:line named).
+        InputFileError: a missing or unreadable file.
+
+    """
+    path = Path(path)
+    odometry = Rows("odometry", ODOMETRY_COLUMNS)
+    loops = Rows("loop", LOOP_COLUMNS)
+    for line_no, words in _lines(path):
+        kind = words[0]
+        if kind not in INPUT_FIELDS:
+            raise LogFormatError(
+                f"{path}:{line_no}: unknown measurement type {kind!r}; a TUC input file has "
+                "'odom2' and 'loop' lines"
+            )
+        values = _numbers(path, line_no, words, INPUT_FIELDS[kind])
+        if kind == "odom2":
+            odometry.add((values[0], values[1], values[3]), f"{path}:{line_no}")
+        else:
+            loops.add(values, f"{path}:{line_no}")
+    truth_path = None
+    truth = None
+    if use_ground_truth:
+        truth_path = Path(ground_truth) if ground_truth is not None else None
+        truth_path = truth_path or ground_truth_companion(path)
+        if truth_path is not None:
+            truth = read_tuc_ground_truth(truth_path)
+    return make_odometry_log(path, "tuc", odometry, loops, truth, truth_path)
+
+
+def read_tuc_ground_truth(path: Path) -> Rows:
+    """The ``point2`` positions of a TUC ground-truth file, with ``angle`` headings if present."""
+    points = Rows("ground truth", TRUTH_COLUMNS[:3])
+    angles: list[tuple[float, float]] = []
+    angle_where: list[str] = []
+    for line_no, words in _lines(path):
+        kind = words[0]
+        if kind not in TRUTH_FIELDS:
+            raise LogFormatError(
+                f"{path}:{line_no}: unknown measurement type {kind!r}; a TUC ground-truth file "
+                "has 'point2' (and 'angle') lines"
+            )
+        values = _numbers(path, line_no, words, TRUTH_FIELDS[kind])
+        if kind == "point2":
+            points.add(values[:3], f"{path}:{line_no}")
+        else:
+            angles.append((values[0], values[1]))
+            angle_where.append(f"{path}:{line_no}")
+    if not angles or not points.values:
+        return points
+    angle = np.asarray(angles)
+    bad = ~np.isfinite(angle)
+    if bad.any():
+        k = int(np.argwhere(bad)[0][0])
+        raise LogFormatError(f"{angle_where[k]}: ground-truth angle is not a finite number")
+    if np.any(np.diff(angle[:, 0]) < 0):
+        k = int(np.flatnonzero(np.diff(angle[:, 0]) < 0)[0]) + 1
+        raise LogFormatError(
+            f"{angle_where[k]}: ground-truth angle time goes backwards; sort the file by time"
+        )
+    times = np.asarray([v[0] for v in points.values], dtype=np.float64)
+    theta = np.interp(times, angle[:, 0], np.unwrap(angle[:, 1]))
+    full = Rows("ground truth", TRUTH_COLUMNS)
+    for (values, where), th in zip(
+        zip(points.values, points.where, strict=True), theta.tolist(), strict=True
+    ):
+        full.add((*values, th), where)
+    return full

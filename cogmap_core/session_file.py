@@ -1,0 +1,702 @@
+"""Session files: the whole SLAM state saved at the end of a run, resumed on another day.
+
+A session holds everything that decides what happens next: the front end (view templates, the
+pose cell network and its experiences, the last view), the three maps (graph arrays, aliases,
+adjacency in its order, the loop-closure clusterer, scene integration's open and pending revisit
+runs and its spatial index, the relocalisation gate's streak, the robot's state, counters, size
+history, optimisation records), the map parameters, the front-end settings, the event log (so the
+maps can be rebuilt for other parameters and evaluated against ground truth) and the data time.
+Resuming it and processing more frames gives exactly what one run over all the data gives.
+
+Format (``cogmap-session``, version 1): a NumPy ``.npz`` archive (zip, each member with its CRC;
+no pickle, read with ``allow_pickle=False``). Member ``header`` is a 0-d unicode array holding
+JSON (as Python writes it; ``NaN`` and ``Infinity`` may occur)::
+
+    {"format": "cogmap-session", "version": 1, "cogmap": "0.1.0",
+     "frontend": {...FrontEndConfig...}, "image_scale": 4, "params": {...MapParams...},
+     "modes": ["standard", ...], "finished": false,
+     "epoch": 1322449200.0, "data_time": 825.3, "frames": 14446, "events": 26209,
+     "bags": [{"bag": "...", "offset": 0.0, "frames": 14446, "first": 0.01, "last": 825.3}],
+     "state": {...scalars of every component...}, "arrays": {"name": [shape, dtype], ...}}
+
+``epoch`` is the absolute time (s) data time counts from; each bag's frames were placed at
+``offset`` + their time in the bag. Every other member is one array named by component, e.g.
+``frontend.templates`` (uint8 ``(T, Y, X)``), ``frontend.pose_cells``, ``log.kind``,
+``map.compact.graph.pose`` or ``map.compact.adjacency.neighbour``; ``header["arrays"]`` lists
+them all with shape and dtype, and a file whose members do not match it is refused. Files are
+written to a temporary name beside the target and renamed when complete. ``log.score`` (each
+link's place-recognition score, NaN where none) may be absent: files written before it existed
+load with no scores.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+import zipfile
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from cogmap_core import __version__
+from cogmap_core.clustering import Cluster, LoopClosureClusterer
+from cogmap_core.cognitive_map import CognitiveMap, MapCounters, MapMode, OptimizationRecord
+from cogmap_core.config import MapParams
+from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.frontend import FrontEnd, FrontEndConfig
+from cogmap_core.frontend.local_view import MatchResult, ViewMatch
+from cogmap_core.frontend.pose_cells import _ViewCell
+from cogmap_core.map_graph import MapGraph
+from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate
+from cogmap_core.scene_integration import KnownEdges, RevisitRun, SceneIntegration
+from cogmap_core.slam import EventLog, SlamSession
+
+FORMAT_NAME = "cogmap-session"
+FORMAT_VERSION = 1
+
+RESUME_GAP_S = 1.0
+"""A bag whose clock does not continue the session's starts this long (s) after its end."""
+
+Arrays = dict[str, NDArray[Any]]
+Json = dict[str, Any]
+
+
+class SessionError(InputFileError):
+    """A session file cannot be used: unreadable, corrupt, another version, other settings."""
+
+
+@dataclass
+class SessionMeta:
+    """What a session knows about the data it has seen.
+
+    Attributes:
+        epoch: absolute time (s) that data time counts from (the first bag's start).
+        image_scale: the JPEG decode reduction the front end saw frames at.
+        bags: per bag processed, ``{"bag", "offset", "frames", "first", "last"}``: its frames
+            were placed at ``offset`` plus their time in the bag.
+
+    """
+
+    epoch: float = 0.0
+    image_scale: int = 4
+    bags: list[dict[str, Any]] = field(default_factory=list)
+
+    def resume_offset(self, bag_start: float, data_time: float) -> float:
+        """Data-time offset of a new bag starting at absolute time ``bag_start`` (s).
+
+        The bags' own clocks when the new one starts after the session's last frame (the robot
+        was off for the gap between them); otherwise (a bag whose clock starts earlier, e.g. a
+        generated one) it starts :data:`RESUME_GAP_S` after the session's last frame.
+        """
+        offset = bag_start - self.epoch
+        if offset <= data_time:
+            offset = data_time + RESUME_GAP_S
+        return offset
+
+
+# ============================================================================ writing
+def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> Path:
+    """Write ``session`` to ``path`` atomically (a temporary file, then a rename)."""
+    path = Path(path)
+    state: Json = {}
+    arrays: Arrays = {}
+    _save_frontend(session.frontend, state, arrays)
+    _save_log(session.log, arrays)
+    state["maps"] = {}
+    for mode, cmap in session.maps.maps.items():
+        state["maps"][mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    log = session.log
+    header = {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "cogmap": __version__,
+        "frontend": session.frontend.config.to_dict(),
+        "image_scale": meta.image_scale,
+        "params": session.params.to_dict(),
+        "modes": [m.value for m in session.modes],
+        "finished": session.finished,
+        "epoch": meta.epoch,
+        "data_time": float(log.frame_time[-1]) if log.frames else 0.0,
+        "frames": log.frames,
+        "events": log.event_count,
+        "bags": meta.bags,
+        "state": state,
+        "arrays": {name: [list(a.shape), a.dtype.str] for name, a in sorted(arrays.items())},
+    }
+    arrays["header"] = np.array(json.dumps(header, sort_keys=True))
+    if not path.parent.is_dir():
+        raise SessionError(f"{path}: folder {path.parent} does not exist; create it first")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            np.savez_compressed(handle, **arrays)
+            handle.flush()
+            os.fsync(handle.fileno())
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp_name, 0o666 & ~mask)
+        os.replace(tmp_name, path)
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _save_frontend(frontend: FrontEnd, state: Json, arrays: Arrays) -> None:
+    lv = frontend.local_view
+    pc = frontend.pose_cells
+    net = pc.network
+    last = frontend.last_view
+    match = lv.last_match
+    state["frontend"] = {
+        "frames": frontend.frames,
+        "last_time": frontend._last_time,
+        "last_view": None if last is None else asdict(last),
+        "indexed": lv._indexed,
+        "last_match": None if match is None else asdict(match),
+        "best": list(net.best),
+        "current_vt": pc.current_vt,
+        "prev_vt": pc.prev_vt,
+        "current_exp": pc.current_exp,
+        "vt_delta_th": pc._vt_delta_th,
+        "frame": pc._frame,
+        "odo_update": pc._odo_update,
+        "vt_update": pc._vt_update,
+    }
+    arrays["frontend.templates"] = (
+        np.stack([lv.template(k) for k in range(lv.count)])
+        if lv.count
+        else np.zeros((0, lv._y, lv._x), dtype=np.uint8)
+    )
+    arrays["frontend.key_signs"] = lv._signs.copy()
+    arrays["frontend.pose_cells"] = net.cells.copy()
+    views = pc._views
+    arrays["frontend.view_cell_pose"] = np.array([(v.x, v.y, v.th) for v in views]).reshape(-1, 3)
+    arrays["frontend.view_cell_decay"] = np.array([v.decay for v in views], dtype=np.float64)
+    arrays["frontend.view_cell_decay_frame"] = np.array(
+        [v.decay_frame for v in views], dtype=np.int64
+    )
+    _save_lists(arrays, "frontend.view_cell_experiences", [v.experiences for v in views])
+    arrays["frontend.experiences"] = np.array(pc._experiences, dtype=np.float64).reshape(-1, 3)
+    arrays["frontend.experience_view"] = np.array(pc._experience_vt, dtype=np.int64)
+
+
+def _save_log(log: EventLog, arrays: Arrays) -> None:
+    for name, column in log.columns().items():
+        arrays[f"log.{name}"] = np.array(column)
+    arrays["log.frame_end"] = np.array(log.frame_end)
+    arrays["log.frame_time"] = np.array(log.frame_time)
+    arrays["log.has_truth"] = np.array(log.has_truth)
+    truth = np.zeros((log.frames, 3))
+    truth[log.has_truth] = log.ground_truth
+    arrays["log.truth"] = truth
+
+
+def _save_map(cmap: CognitiveMap, prefix: str, arrays: Arrays) -> Json:
+    g = cmap.graph
+    n, m = g.num_ids, g.num_edges_total
+    for name in ("pose", "vertex_time", "view", "alive", "alias", "alias_offset"):
+        arrays[prefix + "graph." + name] = getattr(g, name)[:n].copy()
+    for name in ("from", "to", "rel", "time", "kind", "cluster", "alive"):
+        arrays[prefix + "graph.edge_" + name] = getattr(g, "edge_" + name)[:m].copy()
+    # adjacency in each dict's own order: merges and short-edge removal iterate it
+    counts = np.array([len(a) for a in g.adjacency], dtype=np.int64)
+    arrays[prefix + "adjacency.count"] = counts
+    arrays[prefix + "adjacency.neighbour"] = np.fromiter(
+        (w for a in g.adjacency for w in a), dtype=np.int64, count=int(counts.sum())
+    )
+    arrays[prefix + "adjacency.edge"] = np.fromiter(
+        (k for a in g.adjacency for k in a.values()), dtype=np.int64, count=int(counts.sum())
+    )
+    _save_lists(arrays, prefix + "absorbed", g._absorbed)
+    clusters = cmap.clusterer.clusters
+    open_cluster = cmap.clusterer.open_cluster
+    if open_cluster is not None and (not clusters or clusters[-1] is not open_cluster):
+        raise ValueError("the open cluster is not the newest one; cannot save the clusterer")
+    arrays[prefix + "clusters.start_time"] = np.array([c.start_time for c in clusters])
+    arrays[prefix + "clusters.last_time"] = np.array([c.last_time for c in clusters])
+    arrays[prefix + "clusters.edge_count"] = np.array(
+        [c.edge_count for c in clusters], dtype=np.int64
+    )
+    arrays[prefix + "clusters.closed_time"] = np.array(
+        [math.nan if c.closed_time is None else c.closed_time for c in clusters]
+    )
+    integration = cmap.integration
+    known = integration._known
+    if known is not None:
+        for name in ("start", "end", "ends", "newest"):
+            arrays[prefix + "known_edges." + name] = getattr(known, name).copy()
+    _save_records(arrays, prefix + "optimizations.", cmap.optimizations, OptimizationRecord)
+    _save_records(arrays, prefix + "refused.", cmap.refused, RelocalisationCheck)
+    _save_records(
+        arrays,
+        prefix + "accepted_by_consensus.",
+        cmap.gate.accepted_by_consensus,
+        RelocalisationCheck,
+    )
+    times, vertices, edges = cmap.size_history()
+    arrays[prefix + "size_history.time"] = times
+    arrays[prefix + "size_history.vertices"] = vertices
+    arrays[prefix + "size_history.edges"] = edges
+    return {
+        "mode": cmap.mode.value,
+        "params": cmap.params.to_dict(),
+        "graph": {
+            "num_ids": n,
+            "num_edges_total": m,
+            "num_vertices": g.num_vertices,
+            "num_edges": g.num_edges,
+            "num_loop_edges": g.num_loop_edges,
+        },
+        "open_cluster": open_cluster is not None,
+        "integration": {
+            "open": None if integration.open is None else _run_json(integration.open),
+            "pending": [_run_json(run) for run in integration.pending],
+            "relocalised_at": None
+            if integration._relocalised_at is None
+            else list(integration._relocalised_at),
+            "known_edges": None
+            if known is None
+            else {"reach": known.reach, "radius": known.radius, "tree": known.tree is not None},
+        },
+        "streak": [_check_json(c) for c in cmap.gate.streak],
+        "counters": asdict(cmap.counters),
+        "robot": {
+            "current": cmap._current,
+            "accum": list(cmap._accum),
+            "travelled": cmap._travelled,
+            "last_rotation": cmap._last_rotation,
+            "last_time": cmap._last_time,
+            "last_link": None if cmap._last_link is None else list(cmap._last_link),
+        },
+        "edges_at_last_optimization": cmap._edges_at_last_optimization,
+        "optimized_once": cmap._optimized_once,
+    }
+
+
+def _save_records(arrays: Arrays, prefix: str, records: list[Any], kind: type) -> None:
+    """A list of flat dataclass records as one array per field (tuples as ``(n, k)``)."""
+    for f in fields(kind):
+        values = [getattr(r, f.name) for r in records]
+        if f.name == "correction":
+            arrays[prefix + f.name] = np.array(values, dtype=np.float64).reshape(-1, 3)
+        elif f.type in ("int", "bool"):
+            arrays[prefix + f.name] = np.array(values, dtype=np.int64 if f.type == "int" else bool)
+        else:
+            arrays[prefix + f.name] = np.array(values, dtype=np.float64)
+
+
+def _save_lists(arrays: Arrays, prefix: str, lists: list[list[int]]) -> None:
+    counts = np.array([len(x) for x in lists], dtype=np.int64)
+    arrays[prefix + ".count"] = counts
+    arrays[prefix + ".items"] = np.fromiter(
+        (v for x in lists for v in x), dtype=np.int64, count=int(counts.sum())
+    )
+
+
+def _run_json(run: RevisitRun) -> Json:
+    return {
+        "start": run.start,
+        "vertices": list(run.vertices),
+        "created": run.created,
+        "end": run.end,
+        "closing": list(run.closing),
+        "closed": run.closed,
+    }
+
+
+def _check_json(check: RelocalisationCheck) -> Json:
+    out = asdict(check)
+    out["correction"] = list(check.correction)
+    return out
+
+
+# ============================================================================ reading
+def load_session(path: Path | str) -> tuple[SlamSession, SessionMeta]:
+    """Read a session written by :func:`save_session`.
+
+    Raises:
+        SessionError: missing, truncated or corrupt file, another format or version, or
+            contents that do not fit together (one line naming the problem).
+
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise SessionError(f"{path}: no such session file; give the file --save-session wrote")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if "header" not in data.files:
+                raise SessionError(f"{path}: not a cogmap session file (no header)")
+            arrays = {name: data[name] for name in data.files}
+    except SessionError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
+        raise SessionError(
+            f"{path}: not a readable cogmap session file ({type(exc).__name__}: "
+            f"{' '.join(str(exc).split())}); it is truncated or corrupt, use an intact copy"
+        ) from None
+    try:
+        header = json.loads(str(arrays.pop("header")))
+    except (json.JSONDecodeError, ValueError):
+        raise SessionError(
+            f"{path}: the session header is not valid JSON; the file is corrupt"
+        ) from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
+        found = header.get("format") if isinstance(header, dict) else None
+        raise SessionError(f"{path}: not a cogmap session file (format {found!r})")
+    if header.get("version") != FORMAT_VERSION:
+        raise SessionError(
+            f"{path}: session format version {header.get('version')!r} is not supported "
+            f"(this cogmap reads version {FORMAT_VERSION}); resume it with the cogmap that wrote "
+            "it or start a new session"
+        )
+    listed = header.get("arrays")
+    if not isinstance(listed, dict) or set(listed) != set(arrays):
+        raise SessionError(f"{path}: the session's arrays do not match its header; it is corrupt")
+    for name, (shape, dtype) in listed.items():
+        a = arrays[name]
+        if list(a.shape) != shape or a.dtype.str != dtype:
+            raise SessionError(
+                f"{path}: array {name} is {a.dtype.str} {list(a.shape)}, the header says "
+                f"{dtype} {shape}; the file is corrupt"
+            )
+    try:
+        return _restore(header, arrays)
+    except SessionError as exc:
+        raise SessionError(f"{path}: {exc}") from None
+    except (KeyError, IndexError, ValueError, TypeError, ParameterError) as exc:
+        raise SessionError(
+            f"{path}: the session's contents do not fit together ({type(exc).__name__}: {exc}); "
+            "the file is corrupt"
+        ) from None
+
+
+def _restore(header: Json, arrays: Arrays) -> tuple[SlamSession, SessionMeta]:
+    config = FrontEndConfig.from_dict(header["frontend"])
+    params = MapParams.from_dict(header["params"])
+    modes = tuple(MapMode(m) for m in header["modes"])
+    session = SlamSession(params, config, modes)
+    state = header["state"]
+    session.frontend = _load_frontend(config, state["frontend"], arrays)
+    session.log = _load_log(arrays)
+    if session.log.frames != header["frames"] or session.log.event_count != header["events"]:
+        raise SessionError("the event log does not match the header")
+    for mode in modes:
+        session.maps.maps[mode] = _load_map(state["maps"][mode.value], f"map.{mode.value}.", arrays)
+    session.finished = bool(header["finished"])
+    meta = SessionMeta(
+        epoch=float(header["epoch"]),
+        image_scale=int(header["image_scale"]),
+        bags=list(header["bags"]),
+    )
+    return session, meta
+
+
+def _load_frontend(config: FrontEndConfig, s: Json, arrays: Arrays) -> FrontEnd:
+    frontend = FrontEnd(config)
+    lv = frontend.local_view
+    for template in arrays["frontend.templates"]:
+        lv.add(template)  # the same adds rebuild the same index, at the same counts
+    if lv._indexed != s["indexed"] or not np.array_equal(lv._signs, arrays["frontend.key_signs"]):
+        raise SessionError("the view templates do not rebuild the saved index")
+    lv.last_match = None if s["last_match"] is None else MatchResult(**s["last_match"])
+    frontend.last_view = None if s["last_view"] is None else ViewMatch(**s["last_view"])
+    frontend.frames = int(s["frames"])
+    frontend._last_time = float(s["last_time"])
+    pc = frontend.pose_cells
+    net = pc.network
+    cells = arrays["frontend.pose_cells"]
+    if cells.shape != net.cells.shape:
+        raise SessionError("the pose cell network does not match the front-end settings")
+    net.cells = cells.astype(np.float64)
+    net.best = tuple(float(v) for v in s["best"])  # type: ignore[assignment]
+    pose = arrays["frontend.view_cell_pose"].tolist()
+    decay = arrays["frontend.view_cell_decay"].tolist()
+    decay_frame = arrays["frontend.view_cell_decay_frame"].tolist()
+    experiences = _load_lists(arrays, "frontend.view_cell_experiences")
+    pc._views = [
+        _ViewCell(p[0], p[1], p[2], d, f, e)
+        for p, d, f, e in zip(pose, decay, decay_frame, experiences, strict=True)
+    ]
+    pc._experiences = [tuple(e) for e in arrays["frontend.experiences"].tolist()]
+    pc._experience_vt = arrays["frontend.experience_view"].tolist()
+    pc.current_vt = int(s["current_vt"])
+    pc.prev_vt = int(s["prev_vt"])
+    pc.current_exp = int(s["current_exp"])
+    pc._vt_delta_th = float(s["vt_delta_th"])
+    pc._frame = int(s["frame"])
+    pc._odo_update = bool(s["odo_update"])
+    pc._vt_update = bool(s["vt_update"])
+    return frontend
+
+
+def _load_log(arrays: Arrays) -> EventLog:
+    columns = {
+        name: arrays[f"log.{name}"] for name in ("kind", "time", "ref", "view", "value0", "value1")
+    }
+    if "log.score" in arrays:  # links' place-recognition scores (absent from older files)
+        columns["score"] = arrays["log.score"]
+    frame_end = arrays["log.frame_end"]
+    if frame_end.size and frame_end[-1] != columns["kind"].shape[0]:
+        raise SessionError("the frame table does not match the events")
+    return EventLog.from_columns(
+        columns, frame_end, arrays["log.frame_time"], arrays["log.truth"], arrays["log.has_truth"]
+    )
+
+
+def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
+    cmap = CognitiveMap(MapMode(s["mode"]), MapParams.from_dict(s["params"]))
+    g = MapGraph()
+    sizes = s["graph"]
+    n, m = int(sizes["num_ids"]), int(sizes["num_edges_total"])
+    cap_v, cap_e = max(256, n), max(256, m)
+    for name in ("pose", "vertex_time", "view", "alive", "alias", "alias_offset"):
+        current = getattr(g, name)
+        a = np.full((cap_v, *current.shape[1:]), -1 if name == "alias" else 0, current.dtype)
+        a[:n] = arrays[prefix + "graph." + name]
+        setattr(g, name, a)
+    for name in ("from", "to", "rel", "time", "kind", "cluster", "alive"):
+        current = getattr(g, "edge_" + name)
+        a = np.full((cap_e, *current.shape[1:]), -1 if name == "cluster" else 0, current.dtype)
+        a[:m] = arrays[prefix + "graph.edge_" + name]
+        setattr(g, "edge_" + name, a)
+    g.num_ids, g.num_edges_total = n, m
+    g.num_vertices = int(sizes["num_vertices"])
+    g.num_edges = int(sizes["num_edges"])
+    g.num_loop_edges = int(sizes["num_loop_edges"])
+    counts = arrays[prefix + "adjacency.count"].tolist()
+    neighbours = arrays[prefix + "adjacency.neighbour"].tolist()
+    edges = arrays[prefix + "adjacency.edge"].tolist()
+    if len(counts) != n or sum(counts) != len(neighbours):
+        raise SessionError(f"{prefix}adjacency does not match the graph")
+    g.adjacency = []
+    start = 0
+    for c in counts:
+        pairs = zip(neighbours[start : start + c], edges[start : start + c], strict=True)
+        g.adjacency.append(dict(pairs))
+        start += c
+    g._absorbed = _load_lists(arrays, prefix + "absorbed")
+    if len(g._absorbed) != n:
+        raise SessionError(f"{prefix}aliases do not match the graph")
+    if int(np.count_nonzero(g.alive[:n])) != g.num_vertices:
+        raise SessionError(f"{prefix}graph's live vertices do not match its header")
+    cmap.graph = g
+
+    clusterer = LoopClosureClusterer(cmap.params.t_interval, cmap.params.t_total)
+    closed = arrays[prefix + "clusters.closed_time"].tolist()
+    clusterer.clusters = [
+        Cluster(k, a, b, c, None if math.isnan(d) else d)
+        for k, (a, b, c, d) in enumerate(
+            zip(
+                arrays[prefix + "clusters.start_time"].tolist(),
+                arrays[prefix + "clusters.last_time"].tolist(),
+                arrays[prefix + "clusters.edge_count"].tolist(),
+                closed,
+                strict=True,
+            )
+        )
+    ]
+    if s["open_cluster"]:
+        clusterer._open = clusterer.clusters[-1]
+    cmap.clusterer = clusterer
+
+    integration = SceneIntegration()
+    si = s["integration"]
+    integration.open = None if si["open"] is None else _run_from_json(si["open"])
+    integration.pending = [_run_from_json(r) for r in si["pending"]]
+    at = si.get("relocalised_at")  # absent from files of before it existed: no pending one
+    integration._relocalised_at = None if at is None else (int(at[0]), int(at[1]))
+    if si["known_edges"] is not None:
+        known = KnownEdges.__new__(KnownEdges)
+        for name in ("start", "end", "ends", "newest"):
+            setattr(known, name, arrays[prefix + "known_edges." + name])
+        known.reach = float(si["known_edges"]["reach"])
+        known.radius = float(si["known_edges"]["radius"])
+        # the same midpoints build the same tree
+        known.tree = cKDTree(0.5 * (known.start + known.end)) if si["known_edges"]["tree"] else None
+        integration._known = known
+    cmap.integration = integration
+
+    gate = RelocalisationGate()
+    gate.streak = [_check_from_json(c) for c in s["streak"]]
+    gate.accepted_by_consensus = _load_records(  # type: ignore[assignment]
+        arrays, prefix + "accepted_by_consensus.", RelocalisationCheck
+    )
+    cmap.gate = gate
+    cmap.optimizations = _load_records(  # type: ignore[assignment]
+        arrays, prefix + "optimizations.", OptimizationRecord
+    )
+    cmap.refused = _load_records(arrays, prefix + "refused.", RelocalisationCheck)  # type: ignore[assignment]
+    cmap.counters = MapCounters(**s["counters"])
+    robot = s["robot"]
+    cmap._current = int(robot["current"])
+    cmap._accum = [float(v) for v in robot["accum"]]
+    cmap._travelled = float(robot["travelled"])
+    cmap._last_rotation = float(robot["last_rotation"])
+    cmap._last_time = float(robot["last_time"])
+    link = robot["last_link"]
+    cmap._last_link = None if link is None else (float(link[0]), int(link[1]), bool(link[2]))
+    cmap._edges_at_last_optimization = int(s["edges_at_last_optimization"])
+    cmap._optimized_once = bool(s["optimized_once"])
+    cmap._hist_time = arrays[prefix + "size_history.time"].tolist()
+    cmap._hist_vertices = arrays[prefix + "size_history.vertices"].tolist()
+    cmap._hist_edges = arrays[prefix + "size_history.edges"].tolist()
+    return cmap
+
+
+def _load_records(arrays: Arrays, prefix: str, kind: type) -> list[Any]:
+    columns = {f.name: arrays[prefix + f.name].tolist() for f in fields(kind)}
+    count = len(next(iter(columns.values())))
+    if any(len(v) != count for v in columns.values()):
+        raise SessionError(f"{prefix[:-1]} records have columns of different lengths")
+    if "correction" in columns:
+        columns["correction"] = [tuple(c) for c in columns["correction"]]
+    return [kind(**{name: values[k] for name, values in columns.items()}) for k in range(count)]
+
+
+def _load_lists(arrays: Arrays, prefix: str) -> list[list[int]]:
+    counts = arrays[prefix + ".count"].tolist()
+    items = arrays[prefix + ".items"].tolist()
+    if sum(counts) != len(items):
+        raise SessionError(f"{prefix} lists do not match their counts")
+    out = []
+    start = 0
+    for c in counts:
+        out.append(items[start : start + c])
+        start += c
+    return out
+
+
+def _run_from_json(s: Json) -> RevisitRun:
+    return RevisitRun(
+        start=int(s["start"]),
+        vertices=[int(v) for v in s["vertices"]],
+        created=float(s["created"]),
+        end=int(s["end"]),
+        closing=tuple(float(v) for v in s["closing"]),  # type: ignore[arg-type]
+        closed=float(s["closed"]),
+    )
+
+
+def _check_from_json(s: Json) -> RelocalisationCheck:
+    values = dict(s)
+    values["correction"] = tuple(float(v) for v in s["correction"])
+    return RelocalisationCheck(**values)
+
+
+# ============================================================================ checks
+def frontend_mismatch(saved: FrontEndConfig, wanted: FrontEndConfig) -> str | None:
+    """The first setting in which two front-end configurations differ, as ``name=a vs b``."""
+    a, b = saved.to_dict(), wanted.to_dict()
+    for name in a:
+        if a[name] != b[name]:
+            return f"{name}={a[name]!r} (session) vs {b[name]!r} (this run)"
+    return None
+
+
+def check_resumable(
+    path: Path | str, session: SlamSession, meta: SessionMeta, frontend: FrontEndConfig, scale: int
+) -> None:
+    """Refuse (one line) a session whose front end cannot continue on these settings."""
+    mismatch = frontend_mismatch(session.frontend.config, frontend)
+    if mismatch is not None:
+        raise SessionError(
+            f"{path}: the session was made with other front-end settings: {mismatch}; resume "
+            "with the same settings (the bag's profile and --frontend) or start a new session"
+        )
+    if meta.image_scale != scale:
+        raise SessionError(
+            f"{path}: the session's frames were decoded at 1/{meta.image_scale} scale, this run "
+            f"decodes at 1/{scale}; resume with the same scale or start a new session"
+        )
+
+
+def resume_session(
+    path: Path | str,
+    frontend: FrontEndConfig,
+    image_scale: int,
+    param_changes: Mapping[str, float] | None = None,
+) -> tuple[SlamSession, SessionMeta]:
+    """Load a session to continue with these front-end settings and map parameter changes.
+
+    The maps are rebuilt from the session's events when the changes alter its parameters.
+
+    Raises:
+        SessionError: unreadable file, other front-end settings or decode scale, or a session
+            saved after its final optimisation.
+
+    """
+    session, meta = load_session(path)
+    check_resumable(path, session, meta, frontend, image_scale)
+    if session.finished:
+        raise SessionError(
+            f"{path}: the session was saved after its final optimisation and cannot be continued "
+            "exactly; save sessions with cogmap run --save-session"
+        )
+    params = session.params.with_changes(**dict(param_changes or {}))
+    if params != session.params:
+        session.adopt(params, session.rebuild(params, finish=False))
+    return session, meta
+
+
+def same_state(a: SlamSession, b: SlamSession) -> bool:
+    """Whether two sessions hold exactly the same state (what a session file would hold).
+
+    Optimisations' wall times are measurements, not state, and are not compared.
+    """
+    state_a: Json = {}
+    state_b: Json = {}
+    arrays_a: Arrays = {}
+    arrays_b: Arrays = {}
+    for session, state, arrays in ((a, state_a, arrays_a), (b, state_b, arrays_b)):
+        _save_frontend(session.frontend, state, arrays)
+        _save_log(session.log, arrays)
+        for mode, cmap in session.maps.maps.items():
+            state[mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    if json.dumps(state_a, sort_keys=True) != json.dumps(state_b, sort_keys=True):
+        return False
+    if set(arrays_a) != set(arrays_b):
+        return False
+    return all(
+        _array_equal(arrays_a[k], arrays_b[k])
+        for k in arrays_a
+        if not k.endswith(".optimizations.wall_s")
+    )
+
+
+def _array_equal(a: NDArray[Any], b: NDArray[Any]) -> bool:
+    return a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b, equal_nan=True)
+
+
+def describe(meta: SessionMeta, session: SlamSession) -> str:
+    """One line: data time, frames, bags and map sizes of a session."""
+    log = session.log
+    sizes = ", ".join(f"{m.value} {c.num_vertices} V" for m, c in session.maps.maps.items())
+    end = float(log.frame_time[-1]) if log.frames else 0.0
+    return (
+        f"{log.frames} frames, {end:.1f} s of data from {len(meta.bags)} bag(s), "
+        f"{session.frontend.template_count} view templates; {sizes}"
+    )
+
+
+__all__: list[str] = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "RESUME_GAP_S",
+    "SessionError",
+    "SessionMeta",
+    "check_resumable",
+    "describe",
+    "frontend_mismatch",
+    "load_session",
+    "resume_session",
+    "same_state",
+    "save_session",
+]

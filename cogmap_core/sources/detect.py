@@ -1,0 +1,179 @@
+"""Which kind of input a path is, and one way to open any of them.
+
+Kinds: ``bag`` (a ROS bag with camera, odometry and ground truth: the RatSLAM front end runs on
+it), ``tuc`` (a TUC SLAM dataset input file) and ``csv`` (plain CSV odometry with loop and
+ground-truth files beside it). :func:`detect_format` looks at the content: a ROS1 bag starts
+with ``#ROSBAG``, a ROS2 bag is a folder or an ``.mcap``/``.db3`` file, a TUC file's lines start
+with ``odom2``/``loop``, a CSV file's with three comma-separated fields.
+
+Each kind brings its defaults (:class:`InputKind`): the map parameters and the tolerances the
+report judges with. Bags keep the paper's parameters; logs get
+:data:`~cogmap_core.sources.odometry_log.LOG_MAP_PARAMS`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cogmap_core.config import MapParams
+from cogmap_core.datasets.odometry_csv import looks_like_csv, read_odometry_csv
+from cogmap_core.datasets.rosbag_reader import BagReader, open_bag
+from cogmap_core.datasets.topics import BagTopics
+from cogmap_core.datasets.tuc import looks_like_tuc, read_tuc
+from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.sources.odometry_log import (
+    LOG_EVALUATION,
+    LOG_MAP_PARAMS,
+    LogReader,
+    LogSourceConfig,
+)
+
+FORMATS = ("bag", "tuc", "csv")
+BAG_SUFFIXES = (".bag", ".mcap", ".db3")
+_SNIFF_LINES = 5
+
+
+@dataclass(frozen=True)
+class InputKind:
+    """A kind of input and its defaults.
+
+    Attributes:
+        name: ``bag``, ``tuc`` or ``csv``.
+        has_camera: frames carry camera images (the RatSLAM front end runs on them).
+        map_params: default map parameters.
+        evaluation: how its maps and loop closures are judged against ground truth.
+
+    """
+
+    name: str
+    has_camera: bool
+    map_params: MapParams
+    evaluation: EvaluationSettings
+
+
+KINDS: dict[str, InputKind] = {
+    "bag": InputKind("bag", True, MapParams(), EvaluationSettings()),
+    "tuc": InputKind("tuc", False, LOG_MAP_PARAMS, LOG_EVALUATION),
+    "csv": InputKind("csv", False, LOG_MAP_PARAMS, LOG_EVALUATION),
+}
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """How to read a log (ignored for bags).
+
+    Attributes:
+        config: how the log becomes events.
+        loops: the loop file of a CSV log (default: its companion).
+        ground_truth: the ground-truth file (default: the log's companion).
+        use_ground_truth: False reads no ground truth.
+
+    """
+
+    config: LogSourceConfig = field(default_factory=LogSourceConfig)
+    loops: Path | None = None
+    ground_truth: Path | None = None
+    use_ground_truth: bool = True
+
+
+Source = BagReader | LogReader
+"""A reader of any kind: ``info`` (``duration``, ``frame_count``), ``frames(start_time)``,
+``counters``, ``warnings`` and ``close()`` (a context manager)."""
+
+
+def detect_format(path: str | Path) -> str:
+    """The kind of input at ``path``: ``bag``, ``tuc`` or ``csv`` (module doc).
+
+    Raises:
+        InputFileError: missing or empty file, or content of no known kind.
+
+    """
+    path = Path(path)
+    if path.is_dir() or path.suffix.lower() in BAG_SUFFIXES:
+        return "bag"
+    if not path.exists():
+        raise InputFileError(f"{path}: no such file; give a bag, a TUC log or a CSV log")
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(4096)
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
+    if head.startswith(b"#ROSBAG"):
+        return "bag"
+    if not head.strip():
+        raise InputFileError(f"{path}: the file is empty; nothing to map")
+    lines = [
+        line.strip()
+        for line in head.decode("utf-8", errors="replace").splitlines()
+        if line.strip() and not line.strip().startswith("#")
+    ][:_SNIFF_LINES]
+    if lines and looks_like_tuc([line.split()[0] for line in lines]):
+        return "tuc"
+    if lines and looks_like_csv(lines[0]):
+        return "csv"
+    first = lines[0][:60] if lines else ""
+    raise InputFileError(
+        f"{path}: not a bag, a TUC log or a CSV log (first line {first!r}); "
+        f"give --format {{{','.join(FORMATS)}}} if it is one"
+    )
+
+
+def resolve_format(path: str | Path, fmt: str | None) -> str:
+    """``fmt`` when given (checked), else the detected format."""
+    if fmt is None or fmt == "auto":
+        return detect_format(path)
+    if fmt not in FORMATS:
+        raise ParameterError(f"--format {fmt!r}: choose one of auto, {', '.join(FORMATS)}")
+    return fmt
+
+
+def open_source(
+    path: str | Path,
+    fmt: str | None = None,
+    *,
+    topics: BagTopics | None = None,
+    image_scale: int = 4,
+    log: LogOptions | None = None,
+    on_clock_jump: str = "drop",
+    on_corrupt: str = "error",
+) -> Source:
+    """Open any input for streaming (format detected from the content unless given).
+
+    Args:
+        path: the bag or the log's main file.
+        fmt: ``bag``, ``tuc``, ``csv`` or None/``auto``.
+        topics: bag topics (bags only).
+        image_scale: JPEG decode reduction (bags only).
+        log: how to read a log (logs only).
+        on_clock_jump: where a bag's clock jumps back, ``drop`` or ``stop`` (bags only; see
+            :func:`~cogmap_core.datasets.rosbag_reader.open_bag`).
+        on_corrupt: a bag corrupt part-way, ``error`` or ``stop`` (bags only).
+
+    Raises:
+        CogmapError: the input cannot be read (one line naming the problem).
+
+    """
+    kind = resolve_format(path, fmt)
+    log = log or LogOptions()
+    if kind == "bag":
+        if log.loops is not None or log.ground_truth is not None:
+            raise ParameterError(
+                "--loops and --ground-truth belong to logs; a bag's ground truth is a topic "
+                "(--gt-topic)"
+            )
+        return open_bag(
+            path,
+            topics=topics,
+            image_scale=image_scale,
+            on_clock_jump=on_clock_jump,
+            on_corrupt=on_corrupt,
+        )
+    if kind == "tuc":
+        if log.loops is not None:
+            raise ParameterError("--loops belongs to CSV logs; a TUC input file holds its loops")
+        data = read_tuc(path, log.ground_truth, log.use_ground_truth)
+    else:
+        data = read_odometry_csv(path, log.loops, log.ground_truth, log.use_ground_truth)
+    return LogReader(data, log.config)

@@ -1,0 +1,602 @@
+"""Odometry + place recognition -> cognitive-map events: the compact map as someone's back end.
+
+A robot with wheel odometry and any visual place recognition (NetVLAD, sequence matching, ...)
+records two streams: velocities ``(time, v, omega)`` and loop candidates ``(time, matched time,
+score)`` -- "the view at ``time`` looks like the view at ``matched time``, with this similarity".
+This module turns such a log into the event stream of :mod:`cogmap_core.events`, the same
+contract the RatSLAM front end fulfils, so the three maps, the report and the web app work on it
+unchanged. Readers of concrete formats (:mod:`cogmap_core.datasets.tuc`,
+:mod:`cogmap_core.datasets.odometry_csv`) produce an :class:`OdometryLog`; :func:`log_steps` makes
+the events; :class:`LogReader` serves them like a bag reader serves frames.
+
+**Time.** Data time counts from the first odometry sample (the file's stamps minus that one).
+
+**Odometry.** A sample's velocities hold over the interval that ends at its stamp (the first
+sample only starts the clock): the robot turns by ``omega * dt`` and goes ``v * dt`` forward --
+the map's :class:`~cogmap_core.events.Odometry` (rotate, then translate). Lateral velocity (the
+TUC files' ``vy``, a few mm/s) is not part of the map's motion model and is dropped; on Lecture
+Hall that changes the dead-reckoning ATE by 2 mm. An interval longer than ``max_odometry_gap``
+contributes no motion (counted as a warning).
+
+**Vertices** come from movement, as the experience map creates experiences: one at the first
+sample, then a new one whenever the robot has driven ``vertex_step`` metres or turned
+``vertex_turn`` radians since the last. That is the *standard* map, dense like OpenRatSLAM's; the
+compact map's neighborhood fields then decline most of these proposals.
+
+**Loop candidates.** A candidate with score at least ``score_threshold`` becomes a
+:class:`~cogmap_core.events.LinkToVertex` at its time to the vertex made nearest in time to the
+matched time, unless odometry says the robot drove less than ``min_loop_travel`` metres between
+the two times (the view simply has not changed yet: odometry knows that relation better than a
+keyframe match). Several candidates of one query that land on the same vertex give one link, the
+highest score. What the evidence says is "same place": the link's relative pose is zero in
+position and ``relative_rad = 0`` in heading -- a camera only recognises a place it sees from
+about the same direction (on Lecture Hall the true matches' heading differs by a median of 2.4
+degrees, 90 % within 21 degrees). The heading is never judged: loop closures are scored by
+position only.
+
+**No relocalisation.** RatSLAM reports a recognised place as link + set current vertex, and the
+robot then continues from the old vertex. With a camera front end that matches views to a few
+centimetres that is right; with place recognition that is good to a keyframe spacing (about 1 m)
+and makes false matches, it breaks the odometry chain at every match: a false or coarse match
+displaces everything mapped after it, and the Huber loss on the loop edge cannot help because the
+edge is then the only link between before and after. Measured on Lecture Hall with these
+settings (``benchmarks/real_data.py``): standard map ATE 1.12 m with link + set current against
+0.55 m with links only (compact 0.78 m against 0.61 m), 2.7 m with the relocalisation test on. So
+this source emits links only (``relocalise=False``): odometry stays continuous and a false loop
+edge is one robust residual among many. ``relocalise=True`` restores RatSLAM's behaviour.
+
+**Ground truth** (optional) is interpolated at every step. One that covers only part of the run
+is dropped with a warning (the maps are still built; the accuracy figures need the whole run);
+one that does not overlap the run at all is an error -- it belongs to another recording.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cogmap_core.config import MapParams
+from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.evaluation import EvaluationSettings, interpolate_poses
+from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
+from cogmap_core.frames import EventStep
+
+FloatArray = NDArray[np.float64]
+
+#: Map parameters for this kind of input, on top of the paper's (see :data:`LOG_MAP_PARAMS`).
+LOG_MAP_CHANGES: dict[str, float] = {
+    # A vertex every metre on a straight run: place recognition places the robot to about a
+    # keyframe spacing (Lecture Hall: a query every 2.5 s at 0.5 m/s), so finer vertices carry
+    # no information the loops could correct. g(1 m, 0) = 1 + 2.746 = 3.746 = delta.
+    "alpha": 2.746,
+    # Place recognition queries every few seconds; a cluster must span consecutive queries
+    # (the paper's 2 s is below the query period: every query would be a cluster of its own).
+    "t_interval": 5.0,
+    # Scene integration: a revisit merges when it lies within half a metre of the known route
+    # -- the place recognition's precision (libRSF models these loops with sigma 0.5 m) -- and
+    # its closing link converged to 0.3 m: tighter than that precision, so a false link the
+    # optimiser satisfied by bending a sparse map (residual 0.3-0.4 m in the tests' square
+    # run) is not taken for a converged revisit.
+    "integration_radius": 0.5,
+    "integration_max_residual": 0.3,
+    # The relocalisation test is off, as in the paper: without relocalisation (links only) a
+    # refused link only drops evidence, and on Lecture Hall the test does not improve the maps.
+    "gate_position": 1e9,
+    "gate_heading": 1e9,
+}
+LOG_MAP_PARAMS = MapParams().with_changes(**LOG_MAP_CHANGES)
+"""Default map parameters for odometry + place-recognition logs."""
+
+LOG_EVALUATION = EvaluationSettings(layout_radius=0.5, loop_distance=1.0, loop_heading=None)
+"""Judging for this kind of input: layout at 0.5 m; a loop closure is true when the two places
+are within 1 m (twice the place recognition's 0.5 m precision), position only."""
+
+ODOMETRY_COLUMNS = ("time", "v", "omega")
+LOOP_COLUMNS = ("time", "matched time", "score")
+TRUTH_COLUMNS = ("time", "x", "y", "theta")
+
+
+class LogFormatError(InputFileError):
+    """A log file has a malformed line or values that break the log's rules (file:line named)."""
+
+
+@dataclass(frozen=True)
+class LogSourceConfig:
+    """How a log becomes events (defaults: the settings for every log, measured on TUC).
+
+    Attributes:
+        vertex_step: a new vertex after driving this far since the last (m).
+        vertex_turn: ... or turning this much (rad).
+        score_threshold: loop candidates scoring below this are ignored (score in [0, 1]).
+        min_loop_travel: candidates whose two times are less than this many metres of
+            odometry apart are ignored (m).
+        relocalise: also emit SetCurrentVertex after each link (RatSLAM's behaviour).
+        max_odometry_gap: odometry intervals longer than this contribute no motion (s).
+
+    """
+
+    vertex_step: float = 0.2
+    vertex_turn: float = 0.2
+    score_threshold: float = 0.8
+    min_loop_travel: float = 5.0
+    relocalise: bool = False
+    max_odometry_gap: float = 1.0
+
+    def __post_init__(self) -> None:
+        """Reject settings outside their ranges."""
+        checks = (
+            ("vertex_step", self.vertex_step > 0),
+            ("vertex_turn", self.vertex_turn > 0),
+            ("score_threshold", 0.0 <= self.score_threshold <= 1.0),
+            ("min_loop_travel", self.min_loop_travel >= 0),
+            ("max_odometry_gap", self.max_odometry_gap > 0),
+        )
+        for name, ok in checks:
+            value = getattr(self, name)
+            if not (ok and math.isfinite(value)):
+                raise ParameterError(
+                    f"log source setting {name}={value!r} is out of range "
+                    "(score_threshold in [0, 1], min_loop_travel >= 0, the others > 0)"
+                )
+
+    def with_changes(self, **changes: float) -> LogSourceConfig:
+        """A copy with some settings changed (validated; unknown names are an error)."""
+        known = {f.name for f in fields(self)}
+        unknown = set(changes) - known
+        if unknown:
+            raise ParameterError(
+                f"unknown log source setting(s) {sorted(unknown)}; known: {sorted(known)}"
+            )
+        values = {k: bool(v) if k == "relocalise" else float(v) for k, v in changes.items()}
+        return replace(self, **values)  # type: ignore[arg-type]
+
+    def to_dict(self) -> dict[str, float | bool]:
+        """All settings (for config.json and the report)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class OdometryLog:
+    """A validated log: odometry, loop candidates and (optionally) ground truth.
+
+    Times are the file's own (seconds); :func:`log_steps` counts them from ``odometry[0, 0]``.
+
+    Attributes:
+        path: the file the user gave (odometry, or the combined TUC input file).
+        format: ``tuc`` or ``csv``.
+        odometry: ``(N, 3)`` time, forward velocity v (m/s), yaw rate omega (rad/s); N >= 1.
+        loops: ``(M, 3)`` time, matched time, score -- sorted by time.
+        ground_truth: ``(G, 4)`` time, x, y, theta covering the run, or None.
+        ground_truth_path: where the ground truth came from.
+        heading_known: whether the ground truth had a heading (else theta is the direction of
+            travel, for display only).
+        warnings: problems that did not stop the run (one line each).
+
+    """
+
+    path: Path
+    format: str
+    odometry: FloatArray
+    loops: FloatArray
+    ground_truth: FloatArray | None = None
+    ground_truth_path: Path | None = None
+    heading_known: bool = True
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def start(self) -> float:
+        """File time of the first odometry sample (data time 0)."""
+        return float(self.odometry[0, 0])
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last odometry sample."""
+        return float(self.odometry[-1, 0] - self.odometry[0, 0])
+
+
+@dataclass
+class Rows:
+    """Parsed rows of one kind with where each came from (``file:line``), before validation."""
+
+    what: str
+    columns: tuple[str, ...]
+    values: list[Sequence[float]] = field(default_factory=list)
+    where: list[str] = field(default_factory=list)
+
+    def add(self, values: Sequence[float], where: str) -> None:
+        """Append one row."""
+        self.values.append(values)
+        self.where.append(where)
+
+    def array(self) -> FloatArray:
+        """The rows as an ``(n, len(columns))`` array."""
+        return np.asarray(self.values, dtype=np.float64).reshape(-1, len(self.columns))
+
+
+def _check_finite(rows: Rows) -> FloatArray:
+    data = rows.array()
+    bad = ~np.isfinite(data)
+    if bad.any():
+        row, col = (int(v) for v in np.argwhere(bad)[0])
+        raise LogFormatError(
+            f"{rows.where[row]}: {rows.what} {rows.columns[col]} is {float(data[row, col])}; "
+            "every value must be a finite number -- fix or drop the line"
+        )
+    return data
+
+
+def _check_increasing(rows: Rows, data: FloatArray, hint: str) -> None:
+    back = np.flatnonzero(np.diff(data[:, 0]) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise LogFormatError(
+            f"{rows.where[k]}: {rows.what} time {data[k, 0]:.6f} s is earlier than the previous "
+            f"({data[k - 1, 0]:.6f} s); {hint}"
+        )
+
+
+def make_odometry_log(
+    path: Path,
+    fmt: str,
+    odometry: Rows,
+    loops: Rows,
+    truth: Rows | None = None,
+    truth_path: Path | None = None,
+    warnings: Sequence[str] = (),
+) -> OdometryLog:
+    """Validate parsed rows and build the log (the rules every format shares).
+
+    Raises:
+        LogFormatError: no odometry, a non-finite value, odometry or ground truth going back in
+            time, a loop outside the odometry's time span or matching a later or earlier-than-
+            the-data time, a score outside [0, 1], ground truth not overlapping the run.
+
+    """
+    notes = list(warnings)
+    if not odometry.values:
+        raise LogFormatError(
+            f"{path}: no odometry in the file; a log needs {odometry.what} lines "
+            f"({', '.join(odometry.columns)})"
+        )
+    odo = _check_finite(odometry)
+    _check_increasing(odometry, odo, "odometry must be in time order")
+    t_first, t_last = float(odo[0, 0]), float(odo[-1, 0])
+    loop = _check_finite(loops)
+    for k, (t, matched, score) in enumerate(loop.tolist()):
+        where = loops.where[k]
+        if not 0.0 <= score <= 1.0:
+            raise LogFormatError(
+                f"{where}: loop score {score!r} is outside [0, 1] (1 = most similar); "
+                "rescale the place recognition's scores"
+            )
+        if not t_first <= t <= t_last:
+            raise LogFormatError(
+                f"{where}: loop at {t:.6f} s is outside the odometry ({t_first:.6f}-"
+                f"{t_last:.6f} s); loops must happen while the robot is recorded"
+            )
+        if matched < t_first:
+            raise LogFormatError(
+                f"{where}: loop matches time {matched:.6f} s, before the data starts "
+                f"({t_first:.6f} s); the matched place must be one the log recorded"
+            )
+        if matched >= t:
+            raise LogFormatError(
+                f"{where}: loop at {t:.6f} s matches {matched:.6f} s, which is not earlier; "
+                "a loop closes on a place visited before"
+            )
+    loop = loop[np.argsort(loop[:, 0], kind="stable")] if loop.size else loop.reshape(0, 3)
+    gt = None
+    heading_known = True
+    if truth is not None:
+        gt, heading_known, note = _ground_truth(truth, truth_path or path, t_first, t_last)
+        if note:
+            notes.append(note)
+    return OdometryLog(path, fmt, odo, loop, gt, truth_path, heading_known, tuple(notes))
+
+
+def _ground_truth(
+    truth: Rows, path: Path, t_first: float, t_last: float
+) -> tuple[FloatArray | None, bool, str]:
+    """Validated ground truth covering the run, or None with the reason (a warning)."""
+    if not truth.values:
+        return None, True, f"{path}: no ground truth in the file; the report has no accuracy"
+    if len(truth.columns) == 4 and np.isnan(truth.array()[:, 3]).all():
+        truth = Rows(truth.what, truth.columns[:3], [v[:3] for v in truth.values], truth.where)
+    data = _check_finite(truth)
+    _check_increasing(truth, data, "ground truth must be in time order")
+    heading_known = data.shape[1] == 4
+    if not heading_known:
+        data = np.column_stack([data, _direction_of_travel(data[:, 1:3])])
+    g0, g1 = float(data[0, 0]), float(data[-1, 0])
+    if g1 < t_first or g0 > t_last:
+        raise LogFormatError(
+            f"{path}: ground truth covers {g0:.3f}-{g1:.3f} s, the odometry {t_first:.3f}-"
+            f"{t_last:.3f} s: they do not overlap; give the ground truth of this recording "
+            "(or --no-ground-truth)"
+        )
+    period = float(np.median(np.diff(data[:, 0]))) if data.shape[0] > 1 else 0.0
+    slack = max(1.0, 2.0 * period)
+    if g0 > t_first + slack or g1 < t_last - slack:
+        return (
+            None,
+            heading_known,
+            f"{path}: ground truth covers {g0:.1f}-{g1:.1f} s of the {t_first:.1f}-{t_last:.1f} "
+            "s run; the maps are built, the accuracy figures (which need the whole run) left out",
+        )
+    return data, heading_known, ""
+
+
+def _direction_of_travel(xy: FloatArray) -> FloatArray:
+    """Heading from consecutive positions (for display when the ground truth has none)."""
+    step = np.diff(xy, axis=0)
+    moving = np.hypot(step[:, 0], step[:, 1]) > 1e-3
+    heading = np.full(xy.shape[0], np.nan)
+    heading[:-1][moving] = np.arctan2(step[moving, 1], step[moving, 0])
+    known = np.flatnonzero(~np.isnan(heading))
+    if known.size == 0:
+        return np.zeros(xy.shape[0])
+    index = np.maximum.accumulate(np.where(~np.isnan(heading), np.arange(xy.shape[0]), 0))
+    heading = heading[index]
+    heading[: known[0]] = heading[known[0]]
+    return heading
+
+
+# ---------------------------------------------------------------------------------- events
+@dataclass
+class LogStats:
+    """What became of a log's loop candidates and odometry (for the report).
+
+    Attributes:
+        frames: steps produced.
+        loop_candidates: candidates in the file.
+        below_threshold: ignored for a score below the threshold.
+        too_close: ignored for less than ``min_loop_travel`` of odometry between the two times.
+        duplicates: candidates of one query that landed on a vertex another candidate of it
+            already linked, or on the vertex the robot is at.
+        links: links emitted.
+        odometry_gaps: odometry intervals longer than ``max_odometry_gap`` (no motion).
+
+    """
+
+    frames: int = 0
+    loop_candidates: int = 0
+    below_threshold: int = 0
+    too_close: int = 0
+    duplicates: int = 0
+    links: int = 0
+    odometry_gaps: int = 0
+
+
+def log_steps(
+    log: OdometryLog, config: LogSourceConfig | None = None
+) -> tuple[list[EventStep], LogStats]:
+    """The log as steps of map events (module doc), with what became of its loops.
+
+    Steps are at every odometry stamp and every loop-query time; each holds the odometry since
+    the previous step, a proposed vertex when the robot moved far enough, and the query's
+    links. Deterministic: the same log and settings give the same steps.
+    """
+    cfg = config or LogSourceConfig()
+    odo = log.odometry
+    t0 = log.start
+    t_odo = odo[:, 0] - t0
+    loops = log.loops.copy()
+    loops[:, :2] -= t0
+    times = np.union1d(t_odo, loops[:, 0]) if loops.size else t_odo.copy()
+    # velocities of sample i hold over (t_{i-1}, t_i]
+    sample = np.minimum(np.searchsorted(t_odo, times, side="left"), t_odo.size - 1)
+    interval = np.diff(t_odo, prepend=t_odo[0])[sample]
+    dt = np.diff(times, prepend=times[0])
+    gap = interval > cfg.max_odometry_gap
+    dt = np.where(gap, 0.0, dt)
+    translation = odo[sample, 1] * dt
+    rotation = odo[sample, 2] * dt
+    travelled = np.cumsum(np.abs(translation))
+    stats = LogStats(
+        frames=int(times.size),
+        loop_candidates=int(loops.shape[0]),
+        odometry_gaps=int(np.count_nonzero(gap & (np.diff(times, prepend=times[0]) > 0))),
+    )
+    truth = None
+    if log.ground_truth is not None:
+        gt = log.ground_truth
+        truth = interpolate_poses(gt[:, 0] - t0, gt[:, 1:4], times)
+    queries = _queries(loops, times, travelled, cfg, stats)
+    steps: list[EventStep] = []
+    vertex_times: list[float] = []
+    driven = turned = 0.0
+    for k, t in enumerate(times.tolist()):
+        events: list[MapEvent] = [Odometry(t, float(translation[k]), float(rotation[k]))]
+        driven += abs(float(translation[k]))
+        turned += float(rotation[k])
+        if not vertex_times or driven >= cfg.vertex_step or abs(turned) >= cfg.vertex_turn:
+            events.append(CreateVertex(t, len(vertex_times), len(vertex_times)))
+            vertex_times.append(t)
+            driven = turned = 0.0
+        scores: list[float] = []
+        linked: set[int] = set()
+        for score, matched in queries.get(k, ()):
+            target = _nearest(vertex_times, matched)
+            if target in linked or target == len(vertex_times) - 1:
+                stats.duplicates += 1
+                continue
+            linked.add(target)
+            events.append(LinkToVertex(t, target, 0.0))
+            if cfg.relocalise:
+                events.append(SetCurrentVertex(t, target, 0.0))
+            scores.append(score)
+        stats.links += len(scores)
+        pose = (
+            None if truth is None else (float(truth[k, 0]), float(truth[k, 1]), float(truth[k, 2]))
+        )
+        steps.append(EventStep(k, t, tuple(events), pose, tuple(scores)))
+    return steps, stats
+
+
+def _queries(
+    loops: FloatArray,
+    times: FloatArray,
+    travelled: FloatArray,
+    cfg: LogSourceConfig,
+    stats: LogStats,
+) -> dict[int, list[tuple[float, float]]]:
+    """Step index -> the accepted candidates of the query at that step, best score first."""
+    out: dict[int, list[tuple[float, float]]] = {}
+    if not loops.size:
+        return out
+    keep = loops[:, 2] >= cfg.score_threshold
+    stats.below_threshold = int(np.count_nonzero(~keep))
+    step = np.searchsorted(times, loops[:, 0])
+    driven = travelled[step] - np.interp(loops[:, 1], times, travelled)
+    close = keep & (driven < cfg.min_loop_travel)
+    stats.too_close = int(np.count_nonzero(close))
+    for k in np.flatnonzero(keep & ~close).tolist():
+        out.setdefault(int(step[k]), []).append((float(loops[k, 2]), float(loops[k, 1])))
+    for candidates in out.values():
+        candidates.sort(key=lambda c: (-c[0], c[1]))
+    return out
+
+
+def _nearest(times: list[float], t: float) -> int:
+    """Index of the time in sorted ``times`` nearest to ``t`` (the earlier one on a tie)."""
+    k = bisect.bisect_left(times, t)
+    if k == 0:
+        return 0
+    if k == len(times):
+        return k - 1
+    return k - 1 if t - times[k - 1] <= times[k] - t else k
+
+
+# ---------------------------------------------------------------------------------- reader
+@dataclass(frozen=True)
+class LogInfo:
+    """What a log holds (the bag reader's :class:`~cogmap_core.datasets.BagInfo` counterpart).
+
+    Attributes:
+        path: the log file.
+        format: ``tuc`` or ``csv``.
+        duration: seconds of odometry.
+        frame_count: steps the log becomes.
+        odometry_count: odometry samples.
+        loop_count: loop candidates.
+        has_ground_truth: whether ground truth covering the run came with it.
+
+    """
+
+    path: Path
+    format: str
+    duration: float
+    frame_count: int
+    odometry_count: int
+    loop_count: int
+    has_ground_truth: bool
+
+
+@dataclass
+class LogCounters:
+    """Problems met reading the log that did not stop it (``summary.json``'s read_warnings)."""
+
+    frames: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+
+class LogReader:
+    """Serves a log's steps the way :class:`~cogmap_core.datasets.BagReader` serves frames.
+
+    There is no camera: :attr:`has_camera` is False and the steps are
+    :class:`~cogmap_core.frames.EventStep` objects carrying their events and link scores.
+    """
+
+    has_camera = False
+
+    def __init__(self, log: OdometryLog, config: LogSourceConfig | None = None) -> None:
+        """Make the steps of ``log`` once (cheap: a few ms per thousand samples)."""
+        self.log = log
+        self.config = config or LogSourceConfig()
+        self.steps, self.stats = log_steps(log, self.config)
+        self.path = log.path
+        self.info = LogInfo(
+            path=log.path,
+            format=log.format,
+            duration=log.duration,
+            frame_count=len(self.steps),
+            odometry_count=int(log.odometry.shape[0]),
+            loop_count=int(log.loops.shape[0]),
+            has_ground_truth=log.ground_truth is not None,
+        )
+        self.counters = LogCounters(frames=len(self.steps), warnings=list(log.warnings))
+        if self.stats.odometry_gaps:
+            self.counters.warnings.append(
+                f"{self.stats.odometry_gaps} x odometry gap longer than "
+                f"{self.config.max_odometry_gap:g} s (no motion integrated over it)"
+            )
+        self._times = [s.time for s in self.steps]
+
+    @property
+    def warnings(self) -> list[str]:
+        """Problems met reading the log that did not stop it, one line each (empty when clean)."""
+        return list(self.counters.warnings)
+
+    @property
+    def map_params(self) -> MapParams:
+        """Default map parameters for this kind of input."""
+        return LOG_MAP_PARAMS
+
+    @property
+    def evaluation(self) -> EvaluationSettings:
+        """How maps of this kind of input are judged."""
+        return LOG_EVALUATION
+
+    def frames(self, start_time: float = 0.0) -> Iterator[EventStep]:
+        """The steps from data time ``start_time`` (s) on.
+
+        Raises:
+            ParameterError: ``start_time`` outside the log.
+
+        """
+        if not (0.0 <= start_time <= self.info.duration + 1.0) or not math.isfinite(start_time):
+            raise ParameterError(
+                f"start time {start_time} s is outside the log (0-{self.info.duration:.1f} s)"
+            )
+        first = bisect.bisect_left(self._times, start_time)
+        return iter(self.steps[first:])
+
+    def description(self) -> dict[str, Any]:
+        """The source's settings and what became of its loop candidates (for the report)."""
+        stats = self.stats
+        return {
+            "format": self.log.format,
+            "ground_truth": None
+            if self.log.ground_truth_path is None
+            else str(self.log.ground_truth_path),
+            "ground_truth_heading": self.log.heading_known,
+            "settings": self.config.to_dict(),
+            "odometry_samples": self.info.odometry_count,
+            "loop_candidates": stats.loop_candidates,
+            "below_threshold": stats.below_threshold,
+            "too_close": stats.too_close,
+            "duplicates": stats.duplicates,
+            "links": stats.links,
+        }
+
+    def close(self) -> None:
+        """Nothing to release (the log is in memory); for symmetry with the bag reader."""
+
+    def __enter__(self) -> LogReader:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -1,0 +1,130 @@
+"""The event log keeps events and frames as columns and gives them back exactly."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
+from cogmap_core.slam import EventLog
+
+FRAMES: list[tuple[list[MapEvent], float, tuple[float, float, float] | None]] = [
+    ([Odometry(0.0, 0.0, 0.0), CreateVertex(0.0, 0, 0)], 0.0, (0.0, 0.0, 0.0)),
+    ([Odometry(0.1, 0.5, 0.25), CreateVertex(0.1, 1, 1)], 0.1, (0.5, 0.0, 0.25)),
+    ([Odometry(0.2, 0.25, -math.pi / 2)], 0.2, None),
+    (
+        [Odometry(0.3, 0.0, 0.125), LinkToVertex(0.3, 0, 0.5), SetCurrentVertex(0.3, 0, 0.5)],
+        0.3,
+        (0.0, 0.1, 3.0),
+    ),
+    ([Odometry(0.4, 0.1, 0.0), LinkToVertex(0.4, 1, -0.25)], 0.4, None),
+]
+
+
+def build() -> EventLog:
+    log = EventLog()
+    for events, time, truth in FRAMES:
+        log.append_frame(events, time, truth)
+    return log
+
+
+def all_events() -> list[MapEvent]:
+    return [e for events, _, _ in FRAMES for e in events]
+
+
+def test_events_come_back_as_given() -> None:
+    log = build()
+    events = all_events()
+    assert log.frames == 5 and log.event_count == len(events) == len(log.events)
+    assert list(log.events) == events
+    assert log.events[3] == events[3] and log.events[-1] == events[-1]
+    assert log.events[2:6] == events[2:6] and log.events[::3] == events[::3]
+    assert log.events_until(2) == events[:4] and log.events_until() == events
+    assert log.events_until(0) == []
+    with pytest.raises(IndexError):
+        log.events[len(events)]
+    assert log.frame_end.tolist() == [2, 4, 5, 8, 10]
+    assert log.frame_time.tolist() == [0.0, 0.1, 0.2, 0.3, 0.4]
+
+
+def test_ground_truth_per_frame_and_per_link() -> None:
+    log = build()
+    assert log.ground_truth.tolist() == [[0.0, 0.0, 0.0], [0.5, 0.0, 0.25], [0.0, 0.1, 3.0]]
+    assert log.has_truth.tolist() == [True, True, False, True, False]
+    assert not log.has_ground_truth()
+    assert log.link_robot_truth == [(0.0, 0.1, 3.0), None]
+    assert log.link_table() == [(0.3, 0, 0.5), (0.4, 1, -0.25)]
+
+
+def test_views_are_read_only() -> None:
+    log = build()
+    with pytest.raises(ValueError):
+        log.frame_time[0] = 1.0
+    with pytest.raises(ValueError):
+        log.columns()["time"][0] = 1.0
+
+
+def test_growing_past_the_initial_capacity_keeps_everything() -> None:
+    log = EventLog()
+    for k in range(3000):
+        log.append_frame([Odometry(k * 0.1, 0.01 * k, 0.0), CreateVertex(k * 0.1, k, k)], k * 0.1)
+    assert log.event_count == 6000 and log.frames == 3000
+    assert log.events[5999] == CreateVertex(2999 * 0.1, 2999, 2999)
+    assert log.events[4000] == Odometry(2000 * 0.1, 20.0, 0.0)
+    assert log.frame_end[-1] == 6000 and len(log.ground_truth) == 0
+
+
+def test_truncated_and_recording_round_trip() -> None:
+    log = build()
+    part = log.truncated(4)
+    assert list(part.events) == all_events()[:8] and part.frames == 4
+    assert part.link_robot_truth == [(0.0, 0.1, 3.0)]
+    full = EventLog()
+    for events, time, truth in FRAMES:
+        full.append_frame(events, time, truth or (1.0, 2.0, 3.0))
+    again = EventLog.from_recording(full.recording("x"))
+    assert list(again.events) == list(full.events)
+    assert np.array_equal(again.ground_truth, full.ground_truth)
+    assert np.array_equal(again.frame_end, full.frame_end)
+
+
+def test_dead_reckoning_per_frame() -> None:
+    log = build()
+    poses = log.dead_reckoning()
+    # rotate first, then translate: (0.5 at 0.25), (0.25 at 0.25 - pi/2), (0 at ...), (0.1 ...)
+    h1 = 0.25
+    h2 = h1 - math.pi / 2
+    h3 = h2 + 0.125
+    x = [0.0, 0.5 * math.cos(h1)]
+    y = [0.0, 0.5 * math.sin(h1)]
+    x.append(x[-1] + 0.25 * math.cos(h2))
+    y.append(y[-1] + 0.25 * math.sin(h2))
+    x.append(x[-1])
+    y.append(y[-1])
+    x.append(x[-1] + 0.1 * math.cos(h3))
+    y.append(y[-1] + 0.1 * math.sin(h3))
+    assert poses[:, 0] == pytest.approx(x, abs=1e-12)
+    assert poses[:, 1] == pytest.approx(y, abs=1e-12)
+    assert poses[-1, 2] == pytest.approx(h3, abs=1e-12)
+
+
+def test_link_scores_are_a_column() -> None:
+    log = EventLog()
+    log.append_frame([Odometry(0.0, 0.0, 0.0), CreateVertex(0.0, 0, 0)], 0.0)
+    log.append_frame([Odometry(0.1, 0.5, 0.0), CreateVertex(0.1, 1, 1)], 0.1)
+    links = [LinkToVertex(0.2, 0, 0.0), LinkToVertex(0.2, 1, 0.0)]
+    log.append_frame([Odometry(0.2, 0.1, 0.0), *links], 0.2, link_scores=(0.9, 0.85))
+    log.append_frame([LinkToVertex(0.3, 0, 0.0)], 0.3)  # a camera front end's: no score
+    assert log.link_scores == [0.9, 0.85, None]
+    assert [log.link_score(k) for k in range(4)] == [0.9, 0.85, None, None]
+    assert log.truncated(3).link_scores == [0.9, 0.85]
+    score = log.columns()["score"]
+    assert np.isnan(score[:5]).all()  # NaN for events other than links ...
+    assert score[5:7].tolist() == [0.9, 0.85] and np.isnan(score[7])  # ... and links without
+    again = EventLog.from_columns(log.columns(), log.frame_end, log.frame_time)
+    assert again.link_scores == log.link_scores
+    # columns without scores (an event file's) give links without scores
+    columns = {k: v for k, v in log.columns().items() if k != "score"}
+    assert EventLog.from_columns(columns, log.frame_end, log.frame_time).link_scores == [None] * 3

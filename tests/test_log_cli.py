@@ -1,0 +1,243 @@
+"""``cogmap run`` on logs of odometry and place recognition: report, settings, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from app.cli import main
+from cogmap_core.cognitive_map import MapMode
+from cogmap_core.slam import SlamSession
+from cogmap_core.sources.detect import open_source
+from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
+
+DT = 0.1
+SIDE_SAMPLES = 160  # 8 m at 0.5 m/s
+TURN_SAMPLES = 20  # 90 degrees in 2 s
+LAP = 4 * (SIDE_SAMPLES + TURN_SAMPLES)  # 72 s
+YAW_BIAS = 0.01  # rad/s of gyro bias: dead reckoning drifts metres in three laps
+
+
+def square_run(laps: int = 3) -> tuple[list[str], list[str], int]:
+    """A robot lapping an 8 m square: TUC input lines, ground-truth lines, false loops."""
+    x = y = th = 0.0
+    odometry, truth = [], []
+    n = laps * LAP
+    for k in range(n + 1):
+        t = k * DT
+        v = w = 0.0
+        if k > 0:
+            phase = (k - 1) % (SIDE_SAMPLES + TURN_SAMPLES)
+            if phase < SIDE_SAMPLES:
+                v = 0.5
+            else:
+                w = (math.pi / 2) / (TURN_SAMPLES * DT)
+            th += w * DT
+            x += v * DT * math.cos(th)
+            y += v * DT * math.sin(th)
+        odometry.append(f"odom2 {t:.1f} {v:g} 0 {w + YAW_BIAS if k else 0:.9f} 0 0 0")
+        if k % 2 == 0:
+            truth.append(f"point2 {t:.1f} {x:.9f} {y:.9f} 0 0 0 0")
+            truth.append(f"angle {t:.1f} {th:.9f} 0")
+    loops = []
+    for k in range(LAP + 25, n + 1, 25):  # a place-recognition query every 2.5 s
+        loops.append(f"loop {k * DT:.1f} {(k - LAP) * DT:.1f} 0.9")  # the previous lap
+    false = [f"loop {n * DT - 20:.1f} {LAP * DT / 2:.1f} 0.95"]  # across the square
+    return odometry + loops + false, truth, len(false)
+
+
+@pytest.fixture(scope="module")
+def square_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("logs")
+    lines, truth, _ = square_run()
+    (folder / "square_Input.txt").write_text("\n".join(lines) + "\n")
+    (folder / "square_GT.txt").write_text("\n".join(truth) + "\n")
+    return folder / "square_Input.txt"
+
+
+@pytest.fixture(scope="module")
+def report(square_log: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("runs") / "report"
+    assert main(["run", str(square_log), "--out", str(out)]) == 0
+    return out
+
+
+def test_report_of_a_log(report: Path, square_log: Path) -> None:
+    summary = json.loads((report / "summary.json").read_text())
+    reference = SlamSession(LOG_MAP_PARAMS, evaluation=open_source(square_log).evaluation)
+    reference.run(open_source(square_log).frames())
+    assert summary["source"]["format"] == "tuc"
+    assert summary["source"]["ground_truth"] == str(square_log.with_name("square_GT.txt"))
+    assert summary["source"]["links"] == reference.maps[MapMode.STANDARD].counters.links
+    assert summary["frames"] == reference.log.frames == 3 * LAP + 1
+    assert summary["params"]["alpha"] == LOG_MAP_PARAMS.alpha
+    assert summary["layout_radius_m"] == 0.5
+    assert summary["read_warnings"] == {}
+    loops = summary["loop_closures"]
+    # every query of laps 2 and 3 (one link each) and the false match across the square
+    assert loops["total"] == (2 * LAP) // 25 + 1
+    assert (loops["false"], loops["tolerance_m"], loops["tolerance_deg"]) == (1, 1.0, None)
+    (false,) = loops["false_links"]
+    assert false["score"] == 0.95 and false["position_error_m"] > 5.0
+    dr = summary["dead_reckoning_ate_m"]
+    assert dr == pytest.approx(reference.log.dead_reckoning_ate()) and dr > 1.0
+    for mode in MapMode:
+        entry = summary["maps"][mode.value]
+        cmap = reference.maps[mode]
+        assert (entry["vertices"], entry["edges"]) == (cmap.num_vertices, cmap.num_edges)
+        assert entry["ate_m"] == pytest.approx(reference.ate(cmap), abs=1e-6)
+        assert entry["ate_m"] < 0.25 * dr  # the Huber loss absorbs the false match
+        assert entry["completeness"] >= 0.9 and entry["correctness"] >= 0.95  # corners cut
+    standard, compact = summary["maps"]["standard"], summary["maps"]["compact"]
+    assert compact["vertices"] < 0.25 * standard["vertices"]
+    assert summary["maps"]["scene_integration"]["integrated"] > 0  # laps 2, 3 merged
+    config = json.loads((report / "config.json").read_text())
+    assert config["format"] == "tuc" and config["frontend"]["score_threshold"] == 0.8
+    assert config["map"] == LOG_MAP_PARAMS.to_dict()
+    gt = np.loadtxt(report / "groundtruth_tum.txt")
+    assert gt.shape == (standard["vertices"], 8)
+
+
+def test_settings_from_the_command_line(square_log: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "run"
+    args = ["run", str(square_log), "--out", str(out), "--frontend", "score_threshold=0.92"]
+    assert main([*args, "--alpha", "5", "--no-ground-truth"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["source"]["links"] == 1  # only the false match scores above 0.92
+    assert summary["params"]["alpha"] == 5.0 and summary["params"]["t_interval"] == 5.0
+    assert summary["dead_reckoning_ate_m"] is None and summary["loop_closures"]["true"] is None
+    capsys.readouterr()
+
+
+def test_param_options_override_the_log_defaults(square_log: Path, tmp_path: Path) -> None:
+    """--param NAME=VALUE and the paper's flags change the log's defaults, nothing else."""
+    out = tmp_path / "run"
+    args = ["run", str(square_log), "--out", str(out), "--param", "integration_radius=0.3"]
+    assert main([*args, "--beta", "12"]) == 0
+    config = json.loads((out / "config.json").read_text())
+    expected = LOG_MAP_PARAMS.with_changes(integration_radius=0.3, beta=12.0)
+    assert config["map"] == expected.to_dict()
+    assert config["map"]["alpha"] == LOG_MAP_PARAMS.alpha  # still the log's default
+    # a --params table: the parameters it names, the log's defaults for the others
+    table = tmp_path / "p.json"
+    table.write_text('{"delta": 4.5, "t_total": 80}')
+    again = tmp_path / "again"
+    assert main(["run", str(square_log), "--out", str(again), "--params", str(table)]) == 0
+    config = json.loads((again / "config.json").read_text())
+    assert config["map"] == LOG_MAP_PARAMS.with_changes(delta=4.5, t_total=80.0).to_dict()
+
+
+def test_a_log_report_is_staged_like_a_bag_report(square_log: Path, tmp_path: Path) -> None:
+    """The report marker is written; --force replaces only the report's own files."""
+    out = tmp_path / "run"
+    assert main(["run", str(square_log), "--out", str(out)]) == 0
+    assert (out / ".cogmap-report").is_file()
+    mine = out / "notes.txt"
+    mine.write_text("keep me")
+    assert main(["run", str(square_log), "--out", str(out)]) == 2  # not empty: needs --force
+    assert main(["run", str(square_log), "--out", str(out), "--force"]) == 0
+    assert mine.read_text() == "keep me" and (out / "summary.json").is_file()
+
+
+def test_sessions_are_refused_for_logs(square_log: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "run"
+    session = tmp_path / "s.npz"
+    for flag in ("--save-session", "--resume"):
+        if flag == "--resume":
+            assert not session.exists()  # --save-session wrote nothing
+            session.write_bytes(b"anything")
+        code = main(["run", str(square_log), "--out", str(out), flag, str(session)])
+        lines = [ln for ln in capsys.readouterr().err.splitlines() if "cogmap run [" not in ln]
+        assert code == 2 and len(lines) == 1, lines
+        assert f"{flag}: sessions are for bags" in lines[0]
+        assert not out.exists()
+    assert session.read_bytes() == b"anything"
+    assert main(["serve", str(square_log), "--resume", str(session), "--port", "1"]) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if ln]
+    assert len(lines) == 1 and "--resume: sessions are for bags" in lines[0], lines
+
+
+def write(path: Path, lines: list[str]) -> Path:
+    path.write_text("".join(line + "\n" for line in lines))
+    return path
+
+
+ODOM = [f"odom2 {k / 10:.1f} 0.5 0 0 0 0 0" for k in range(50)]
+
+
+def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
+    """(case, arguments after 'run FILE --out DIR' prefix, expected message part)."""
+    partial = write(tmp / "partial_GT.txt", [f"point2 {k} 0 0 0 0 0 0" for k in range(3)])
+    other = write(tmp / "other_GT.txt", [f"point2 {k} 0 0 0 0 0 0" for k in range(90, 99)])
+    return [
+        (
+            "malformed line",
+            [str(write(tmp / "a.txt", [*ODOM[:3], "odom2 0.3 0.5 0 0"]))],
+            "a.txt:4: each 'odom2' line has 7 numbers after the type, this one 4",
+        ),
+        (
+            "odometry going backwards",
+            [str(write(tmp / "b.txt", [ODOM[0], ODOM[2], ODOM[1]]))],
+            "b.txt:3: odometry time 0.100000 s is earlier than the previous (0.200000 s)",
+        ),
+        (
+            "loop before the data",
+            [str(write(tmp / "c.txt", [*ODOM, "loop 4 -1 0.9"]))],
+            "c.txt:51: loop matches time -1.000000 s, before the data starts",
+        ),
+        (
+            "NaN value",
+            [str(write(tmp / "d.txt", [*ODOM[:5], "odom2 0.5 nan 0 0 0 0 0"]))],
+            "d.txt:6: odometry v is nan",
+        ),
+        ("empty file", [str(write(tmp / "e.txt", []))], "e.txt: the file is empty"),
+        (
+            "ground truth of another run",
+            [str(write(tmp / "f.txt", ODOM)), "--ground-truth", str(other)],
+            "other_GT.txt: ground truth covers 90.000-98.000 s, the odometry 0.000-4.900 s",
+        ),
+        (
+            "CSV with a broken row",
+            [str(write(tmp / "g_odometry.csv", ["time,v,omega", "0,1,0", "1,1"]))],
+            "g_odometry.csv:3: 2 columns; odometry files have 3 (time,v,omega)",
+        ),
+        (
+            "--loops with a TUC file",
+            [str(square_log), "--loops", str(tmp / "x.csv")],
+            "--loops belongs to CSV logs",
+        ),
+        (
+            "unknown log setting",
+            [str(square_log), "--frontend", "threshold=0.5"],
+            "unknown log source setting(s) ['threshold']",
+        ),
+        (
+            "partial ground truth is only a warning",
+            [str(write(tmp / "h.txt", ODOM)), "--ground-truth", str(partial)],
+            "warning: " + str(partial) + ": ground truth covers 0.0-2.0 s of the 0.0-4.9 s run",
+        ),
+    ]
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, square_log: Path, capsys) -> None:
+    for case, args, message in bad_inputs(tmp_path, square_log):
+        out = tmp_path / f"out-{case.replace(' ', '-')}"
+        code = main(["run", *args[:1], "--out", str(out), *args[1:]])
+        captured = capsys.readouterr()
+        err = captured.err
+        lines = [line for line in err.splitlines() if "cogmap run [" not in line]
+        if case.startswith("partial"):
+            assert code == 0, case
+            # printed after the table like a bag's reader warnings
+            assert any(line.startswith(message) for line in captured.out.splitlines()), case
+            summary = json.loads((out / "summary.json").read_text())
+            assert summary["dead_reckoning_ate_m"] is None
+            continue
+        assert code == 2, (case, err)
+        assert len(lines) == 1 and message in lines[0], (case, err)
+        assert lines[0].startswith("cogmap run: error: ")
+        assert not out.exists(), case

@@ -1,0 +1,103 @@
+"""The web app on a log of odometry and place recognition: same maps, link scores, no camera."""
+
+from __future__ import annotations
+
+import bisect
+import re
+from pathlib import Path
+
+import pytest
+
+from app.cli import main
+from app.server.app import CogmapApp, recent_links
+from app.server.export import summary_dict
+from app.server.replay import PlaybackState
+from cogmap_core.cognitive_map import MapMode
+from cogmap_core.slam import SlamSession
+from cogmap_core.sources.detect import open_source
+from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
+from tests.test_log_cli import square_run
+from tests.test_server_support import assert_same_map, counter, running_app
+
+
+@pytest.fixture(scope="module")
+def square_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("server-log")
+    lines, truth, _ = square_run(laps=2)
+    (folder / "square_Input.txt").write_text("\n".join(lines) + "\n")
+    (folder / "square_GT.txt").write_text("\n".join(truth) + "\n")
+    return folder / "square_Input.txt"
+
+
+@pytest.fixture(scope="module")
+def reference(square_log: Path) -> SlamSession:
+    reader = open_source(square_log)
+    session = SlamSession(LOG_MAP_PARAMS, evaluation=reader.evaluation)
+    session.run(reader.frames())
+    return session
+
+
+def wait(app: CogmapApp) -> None:
+    assert app.wait_idle(60), "the replay did not settle"
+
+
+def test_a_log_replays_with_link_scores_and_no_camera(
+    square_log: Path, reference: SlamSession
+) -> None:
+    with running_app(square_log, params=LOG_MAP_PARAMS, defaults=LOG_MAP_PARAMS) as app:
+        wait(app)
+        r = app.replay
+        assert r.state is PlaybackState.ENDED and r.message == "" and not r.has_camera
+        assert r.cursor == reference.log.frames == r.total_frames
+        for mode in MapMode:
+            assert_same_map(r.session.maps[mode], reference.maps[mode])
+        compact = reference.maps[MapMode.COMPACT]
+        assert counter(app, "compact-ate") == f"{reference.ate(compact):.3f}"
+        assert not app.camera_image.visible
+        links = reference.log.link_table()
+        shown = re.findall(
+            r"<tr><td>([\d.]+)</td><td>(\d+)</td><td>([\d.]+)</td></tr>", app.links_html.content
+        )
+        expected = recent_links(reference.log, reference.log.frames, 8)
+        assert len(shown) == 8 and expected[-1][:2] == links[-1][:2]
+        assert [(float(t), int(v), float(s)) for t, v, s in shown] == [
+            (round(t, 1), v, round(s, 3)) for t, v, s in reversed(expected)
+        ]
+        assert {s for _, _, s in expected} <= {0.9, 0.95}  # the place recognition's scores
+        with r.lock:
+            summary = summary_dict(r)
+        assert summary["source"]["format"] == "tuc"
+        assert summary["maps"]["compact"]["vertices"] == compact.num_vertices
+        assert summary["loop_closures"]["tolerance_deg"] is None
+        assert [f["score"] for f in summary["loop_closures"]["false_links"]] == [0.95]
+        # a slider and "reset to defaults" rebuild from the cached events
+        app.param_sliders["alpha"].value = 10.0
+        wait(app)
+        expected_maps = reference.rebuild(LOG_MAP_PARAMS.with_changes(alpha=10.0))
+        assert_same_map(r.session.maps[MapMode.COMPACT], expected_maps[MapMode.COMPACT])
+        assert app.reset_button.label == "reset to defaults"
+        app.reset_params()
+        wait(app)
+        assert r.params == LOG_MAP_PARAMS
+        assert_same_map(r.session.maps[MapMode.COMPACT], compact)
+        # seeking replays the steps from the cache
+        r.pause()  # (a seek while playing plays on from there)
+        app.seek_slider.value = 100.0
+        wait(app)
+        k = bisect.bisect_right(reference.log.frame_time, 100.0)
+        assert r.cursor == k
+        partial = reference.rebuild(LOG_MAP_PARAMS, frames=k, finish=False)
+        for mode in MapMode:
+            assert_same_map(r.session.maps[mode], partial[mode])
+
+
+def test_serve_refuses_a_bad_log_before_starting(tmp_path: Path, capsys) -> None:
+    empty = tmp_path / "empty_Input.txt"
+    empty.write_text("")
+    assert main(["serve", str(empty), "--port", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"cogmap serve: error: {empty}: the file is empty; nothing to map"]
+    odometry = tmp_path / "run_odometry.csv"
+    odometry.write_text("0,1,0\n")
+    assert main(["serve", str(odometry), "--frontend", "score_threshold=2"]) == 2
+    assert "score_threshold=2.0 is out of range" in capsys.readouterr().err
