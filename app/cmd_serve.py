@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -121,6 +122,8 @@ def _serve(args: argparse.Namespace) -> int:
         static_dir=Path(args.static) if args.static else None,
         frontend=lambda bag_path: frontend_from_args(args, bag_path),
         topics=topics,
+        rebuild_workers=min(2, os.cpu_count() or 1),
+        wait_for_viewer=not args.no_wait,
         fmt=kind.name,
         log=log,
         defaults=kind.map_params,
@@ -188,6 +191,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="playback speed: data seconds per second, or 'max' (default 1)",
     )
     parser.add_argument("--paused", action="store_true", help="start paused")
+    parser.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="start playing at once (default: when the first browser connects)",
+    )
     parser.add_argument(
         "--resume",
         default=None,

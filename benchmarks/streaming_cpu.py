@@ -138,9 +138,7 @@ def part1(bag: Path, window: float, clients: int) -> None:
         f"{time.perf_counter() - t0:.1f} s; maps: "
         + ", ".join(f"{m.value} {replay.session.maps[m].num_vertices} V" for m in MapMode)
     )
-    app.mode_dropdown.value = MapMode.STANDARD.value  # the biggest map on screen ...
-    app.compare_checkbox.value = True  # ... beside the compact one
-    app.compare_dropdown.value = MapMode.COMPACT.value
+    app.show_maps(MapMode.STANDARD, MapMode.COMPACT)  # the biggest map beside the compact one
     worker = replay._thread
     assert worker is not None
     drainer = drain(server.get_port(), clients, window + 3.0)

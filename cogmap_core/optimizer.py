@@ -30,6 +30,7 @@ solve. Here the Python code runs *once per evaluation of the whole problem*, vec
 
 from __future__ import annotations
 
+import math
 import signal
 import time
 from dataclasses import dataclass
@@ -150,8 +151,14 @@ class EdgeModel:
         rz_t = np.zeros_like(information)
         rz_t[:, 0, 0], rz_t[:, 0, 1], rz_t[:, 1, 0], rz_t[:, 1, 1] = cz, sz, -sz, cz
         rz_t[:, 2, 2] = 1.0
-        if (information == _IDENTITY).all():  # the cognitive map's edges: no whitening needed
+        diagonal = information[:, [0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]]
+        scale = information[:, [0, 1, 2], [0, 1, 2]]
+        if (information == _IDENTITY).all():  # the paper's identity weights: no whitening needed
             self.whitening = rz_t
+        elif not diagonal.any() and (scale > 0).all() and np.isfinite(scale).all():
+            # Diagonal information (the map's noise model): the Cholesky factor is the square
+            # root of the diagonal, and this product is exactly the general one below.
+            self.whitening = np.sqrt(scale)[:, :, None] * rz_t
         else:
             try:
                 lower = np.linalg.cholesky(information)  # Omega = L L^T, so S = L^T
@@ -256,8 +263,98 @@ def graph_cost(
 # --------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True, slots=True)
+class _Plan:
+    """How the edges are split into residual blocks and where their Jacobians go.
+
+    Edges are sorted by the pair of chunks they join; each run of one pair is a *group* (one
+    residual block). ``dense`` (owned by :class:`_Snapshot`) holds every group's Jacobian blocks
+    as Ceres lays them out -- per group and parameter block, row-major ``(3 edges, 3 n_block)``
+    -- one after the other; ``target[e, end, a, b]`` is where the derivative of residual ``a`` of
+    edge ``e`` with respect to component ``b`` of its ``end`` (0 from, 1 to) goes. Positions that
+    are not targets are structural zeros and stay zero.
+
+    Attributes:
+        group_start: ``(G + 1,)`` first edge of each group (and the number of edges).
+        group_chunks: the chunks (parameter blocks) of each group, one or two.
+        spans: per group and parameter block, the ``(start, end)`` of its block in ``dense``.
+        target: ``(E * 18,)`` flat targets in ``dense`` (-1: none, the edge is a self-loop).
+        local_from, local_to: per edge, its vertices' indices in the concatenation of its
+            group's chunks (for a group evaluated away from the snapshot).
+        dense_size: length of ``dense``.
+
+    """
+
+    group_start: IntArray
+    group_chunks: list[list[int]]
+    spans: list[list[tuple[int, int]]]
+    target: IntArray
+    local_from: IntArray
+    local_to: IntArray
+    dense_size: int
+
+
+def _plan_groups(
+    edge_from: IntArray,
+    edge_to: IntArray,
+    chunk_of: IntArray,
+    chunk_start: IntArray,
+    chunk_len: IntArray,
+) -> _Plan:
+    """Split edges (already sorted by chunk pair) into groups and plan their Jacobian layout."""
+    e = edge_from.shape[0]
+    ends = np.stack([edge_from, edge_to], axis=1)  # (E, 2)
+    chunk = chunk_of[ends]
+    lo = chunk.min(axis=1)
+    hi = chunk.max(axis=1)
+    key = lo * (int(chunk_of.max()) + 1) + hi
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    g = starts.size
+    counts = np.diff(np.r_[starts, e])
+    group_of = np.repeat(np.arange(g), counts)
+    q = np.arange(e) - starts[group_of]  # edge index within its group
+    rows = 3 * counts
+    g_lo, g_hi = lo[starts], hi[starts]
+    two = g_lo != g_hi
+    size0 = rows * 3 * chunk_len[g_lo]
+    size1 = np.where(two, rows * 3 * chunk_len[g_hi], 0)
+    off0 = np.cumsum(np.r_[0, (size0 + size1)[:-1]]) if g else np.zeros(0, dtype=np.int64)
+    off1 = off0 + size0
+    block = (chunk != lo[:, None]).astype(np.int64)  # 0: the group's first chunk, 1: its second
+    within = ends - chunk_start[chunk]  # vertex index inside its chunk
+    cols = 3 * chunk_len[chunk]  # (E, 2) columns of the parameter block of each end
+    offset = np.where(block == 0, off0[group_of][:, None], off1[group_of][:, None])
+    base = offset + 3 * q[:, None] * cols + 3 * within  # (E, 2)
+    a = np.arange(3)[None, None, :, None]
+    b = np.arange(3)[None, None, None, :]
+    target = base[:, :, None, None] + a * cols[:, :, None, None] + b
+    target[edge_from == edge_to] = -1  # a self-loop's two derivatives cancel: no entry
+    local = within + block * chunk_len[lo][:, None]
+    lo_list, hi_list, two_list = g_lo.tolist(), g_hi.tolist(), two.tolist()
+    o0, o1 = off0.tolist(), off1.tolist()
+    s0, s1 = size0.tolist(), size1.tolist()
+    group_chunks: list[list[int]] = []
+    spans: list[list[tuple[int, int]]] = []
+    for k in range(g):
+        if two_list[k]:
+            group_chunks.append([lo_list[k], hi_list[k]])
+            spans.append([(o0[k], o0[k] + s0[k]), (o1[k], o1[k] + s1[k])])
+        else:
+            group_chunks.append([lo_list[k]])
+            spans.append([(o0[k], o0[k] + s0[k])])
+    return _Plan(
+        group_start=np.r_[starts, e].astype(np.int64),
+        group_chunks=group_chunks,
+        spans=spans,
+        target=target.reshape(-1),
+        local_from=local[:, 0].copy(),
+        local_to=local[:, 1].copy(),
+        dense_size=int(off1[-1] + s1[-1]) if g else 0,
+    )
+
+
 class _Snapshot:
-    """All edge residuals/Jacobians at the point Ceres is currently evaluating."""
+    """All edge residuals and Jacobians at the point Ceres is currently evaluating."""
 
     def __init__(
         self,
@@ -266,6 +363,7 @@ class _Snapshot:
         edge_to: IntArray,
         model: EdgeModel,
         huber_scale: float | None,
+        plan: _Plan,
         num_chunks: int,
     ) -> None:
         self.poses = poses.copy()
@@ -275,7 +373,10 @@ class _Snapshot:
         self.huber_scale = huber_scale
         self.chunk_bytes: list[bytes | None] = [None] * num_chunks
         self.residuals = np.zeros(0)
-        self.jacobians = np.zeros(0)
+        self.dense = np.zeros(plan.dense_size)
+        keep = plan.target >= 0
+        self.dense_target = plan.target[keep]
+        self.dense_source = np.flatnonzero(keep) if not keep.all() else None
         self.has_jacobians = False
         self.recomputed_groups = 0
 
@@ -288,7 +389,10 @@ class _Snapshot:
         )
         self.residuals = res.reshape(-1)
         if jac is not None:
-            self.jacobians = jac.reshape(-1)
+            flat = jac.reshape(-1)
+            self.dense[self.dense_target] = (
+                flat if self.dense_source is None else flat[self.dense_source]
+            )
         self.has_jacobians = with_jacobians
 
 
@@ -313,125 +417,65 @@ class _SnapshotCost(pyceres.CostFunction):
         return True
 
 
-@dataclass(frozen=True, slots=True)
-class _GroupPlan:
-    """Where one edge group's Jacobian entries come from and go to.
-
-    ``source[k]`` indexes the snapshot's flat Jacobian array ``(E, 2, 3, 3)``; ``target[k]`` the
-    flat Jacobian buffer Ceres gives for the group's ``k``-th parameter block (row-major
-    ``(3 edges, 3 n_block)``). ``local_from``/``local_to`` index vertices in the concatenation of
-    the group's chunks (for the fallback evaluation).
-    """
-
-    first_edge: int
-    end_edge: int
-    chunks: list[int]
-    source: list[IntArray]
-    target: list[IntArray]
-    local_from: IntArray
-    local_to: IntArray
-
-
-def _plan_groups(
-    edge_from: IntArray,
-    edge_to: IntArray,
-    chunk_of: IntArray,
-    chunk_start: IntArray,
-    chunk_len: IntArray,
-) -> list[_GroupPlan]:
-    """Split edges (already sorted by chunk pair) into groups and plan their Jacobian scatter."""
-    e = edge_from.shape[0]
-    ends = np.stack([edge_from, edge_to], axis=1)  # (E, 2)
-    chunk = chunk_of[ends]
-    lo = chunk.min(axis=1)
-    hi = chunk.max(axis=1)
-    key = lo * (int(chunk_of.max()) + 1) + hi
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    group_of = np.repeat(np.arange(starts.size), np.diff(np.r_[starts, e]))
-    q = np.arange(e) - starts[group_of]  # edge index within its group
-    block = (chunk != lo[:, None]).astype(np.int64)  # 0: first chunk of the group, 1: second
-    within = ends - chunk_start[chunk]  # vertex index inside its chunk
-    n_block = chunk_len[chunk]
-    local = within + block * chunk_len[lo][:, None]
-    a = np.arange(3)[None, None, :, None]
-    b = np.arange(3)[None, None, None, :]
-    target = (3 * q[:, None, None, None] + a) * (3 * n_block[:, :, None, None]) + (
-        3 * within[:, :, None, None] + b
-    )
-    source = np.arange(e * 18, dtype=np.int64).reshape(e, 2, 3, 3)
-    slot = np.broadcast_to((group_of[:, None] * 2 + block)[:, :, None, None], target.shape)
-    order = np.argsort(slot.reshape(-1), kind="stable")
-    slot_sorted = slot.reshape(-1)[order]
-    target_sorted = target.reshape(-1)[order]
-    source_sorted = source.reshape(-1)[order]
-    bounds = np.searchsorted(slot_sorted, np.arange(2 * starts.size + 1))
-    plans = []
-    for g, g0 in enumerate(starts.tolist()):
-        g1 = int(starts[g + 1]) if g + 1 < starts.size else e
-        chunks = [int(lo[g0])] if lo[g0] == hi[g0] else [int(lo[g0]), int(hi[g0])]
-        src, tgt = [], []
-        for k in range(len(chunks)):
-            s0, s1 = int(bounds[2 * g + k]), int(bounds[2 * g + k + 1])
-            src.append(source_sorted[s0:s1])
-            tgt.append(target_sorted[s0:s1])
-        plans.append(
-            _GroupPlan(g0, g1, chunks, src, tgt, local[g0:g1, 0].copy(), local[g0:g1, 1].copy())
-        )
-    return plans
-
-
 class _EdgeGroupCost(pyceres.CostFunction):
     """The edges joining one chunk to itself or to one other chunk (contiguous in edge order)."""
 
-    def __init__(self, snapshot: _Snapshot, plan: _GroupPlan, chunk_len: IntArray) -> None:
+    def __init__(
+        self, snapshot: _Snapshot, plan: _Plan, group: int, block_sizes: list[int]
+    ) -> None:
         super().__init__()
+        first, end = int(plan.group_start[group]), int(plan.group_start[group + 1])
+        self.set_num_residuals(3 * (end - first))
+        self.set_parameter_block_sizes(block_sizes)
         self.snapshot = snapshot
         self.plan = plan
-        self.set_num_residuals(3 * (plan.end_edge - plan.first_edge))
-        self.set_parameter_block_sizes([3 * int(chunk_len[c]) for c in plan.chunks])
-        self.res_slice = slice(plan.first_edge * 3, plan.end_edge * 3)
-        self.local_source = [src - plan.first_edge * 18 for src in plan.source]
-
-    def _is_fresh(self, parameters: list[FloatArray], with_jacobians: bool) -> bool:
-        snap = self.snapshot
-        if with_jacobians and not snap.has_jacobians:
-            return False
-        for chunk, values in zip(self.plan.chunks, parameters, strict=True):
-            if snap.chunk_bytes[chunk] != values.tobytes():
-                return False
-        return True
+        self.first, self.end = first, end
+        self.chunks = plan.group_chunks[group]
+        self.spans = plan.spans[group]
+        self.r0, self.r1 = 3 * first, 3 * end
 
     def Evaluate(  # noqa: N802 (Ceres' name)
         self, parameters: list[FloatArray], residuals: FloatArray, jacobians: list | None
     ) -> bool:
         snap = self.snapshot
-        plan = self.plan
-        with_jacobians = jacobians is not None
-        if self._is_fresh(parameters, with_jacobians):
-            residuals[:] = snap.residuals[self.res_slice]
+        fresh = jacobians is None or snap.has_jacobians
+        if fresh:
+            stored = snap.chunk_bytes
+            for chunk, values in zip(self.chunks, parameters, strict=True):
+                if stored[chunk] != values.tobytes():
+                    fresh = False
+                    break
+        if fresh:
+            residuals[:] = snap.residuals[self.r0 : self.r1]
             if jacobians is not None:
-                jac = snap.jacobians
-                for block, source, target in zip(jacobians, plan.source, plan.target, strict=True):
+                dense = snap.dense
+                for block, (a, b) in zip(jacobians, self.spans, strict=True):
                     if block is not None:
-                        block.fill(0.0)
-                        block[target] = jac[source]
+                        block[:] = dense[a:b]
             return True
         # Ceres evaluated this block at another point than the snapshot: compute it on its own.
         snap.recomputed_groups += 1
+        plan = self.plan
         x = np.concatenate(parameters).reshape(-1, 3)
-        model = snap.model.subset(slice(plan.first_edge, plan.end_edge))
+        edges = slice(self.first, self.end)
         res, jac = edge_terms(
-            x[plan.local_from], x[plan.local_to], model, snap.huber_scale, with_jacobians
+            x[plan.local_from[edges]],
+            x[plan.local_to[edges]],
+            snap.model.subset(edges),
+            snap.huber_scale,
+            jacobians is not None,
         )
         residuals[:] = res.reshape(-1)
         if jacobians is not None and jac is not None:
-            flat = jac.reshape(-1)
-            for block, source, target in zip(
-                jacobians, self.local_source, plan.target, strict=True
-            ):
+            target = plan.target[18 * self.first : 18 * self.end]
+            keep = target >= 0
+            values = jac.reshape(-1)[keep]
+            target = target[keep]
+            for block, (a, b) in zip(jacobians, self.spans, strict=True):
                 if block is not None:
                     block.fill(0.0)
-                    block[target] = flat[source]
+                    mine = (target >= a) & (target < b)
+                    block[target[mine] - a] = values[mine]
         return True
 
 
@@ -482,50 +526,60 @@ def optimize_pose_graph(
     started = time.perf_counter()
     if not (np.isfinite(graph.poses).all() and np.isfinite(graph.measurements).all()):
         raise OptimizationError("the pose graph has NaN or infinite poses or measurements")
-    initial_cost = graph_cost(graph, huber_scale=options.huber_scale)
     n, e = graph.num_vertices, graph.num_edges
     fixed = _gauge_fixed(graph) if n else graph.fixed
     if e == 0 or fixed.all() or options.max_iterations == 0:
+        initial_cost = graph_cost(graph, huber_scale=options.huber_scale)
         poses = graph.poses.copy()
         poses[:, 2] = wrap_angle(poses[:, 2])
         return OptimizationResult(
             poses, initial_cost, initial_cost, 0, time.perf_counter() - started, "NO_PROBLEM"
         )
 
-    work = graph.copy()
-    work.fixed = fixed
-    use_lago = options.initialization == "lago" or (
-        options.initialization == "auto" and initial_cost > AUTO_LAGO_COST_PER_EDGE * e
-    )
+    # Ceres reports the cost at the start point; it is computed here only when it decides the
+    # initialisation or when the start point is not the given poses (LAGO).
+    initial_cost = math.nan
+    use_lago = options.initialization == "lago"
+    if options.initialization == "auto":
+        initial_cost = graph_cost(graph, huber_scale=options.huber_scale)
+        use_lago = initial_cost > AUTO_LAGO_COST_PER_EDGE * e
     if use_lago:
+        if math.isnan(initial_cost):
+            initial_cost = graph_cost(graph, huber_scale=options.huber_scale)
+        work = graph.copy()
+        work.fixed = fixed
         with np.errstate(over="ignore", invalid="ignore"):
-            work.poses = lago_initialization(work)
-        if not np.isfinite(work.poses).all():
+            start = lago_initialization(work)
+        if not np.isfinite(start).all():
             raise OptimizationError(
                 "the LAGO initialisation overflowed: the graph's values are too large; rescale "
                 "the graph, or start from its own poses (initialization 'none')"
             )
-    poses = np.ascontiguousarray(work.poses, dtype=np.float64)
+        poses = np.ascontiguousarray(start, dtype=np.float64)
+    else:
+        poses = np.array(graph.poses, dtype=np.float64, order="C")  # a copy Ceres works in
 
     bounds = _chunk_bounds(n, fixed, options.chunk_size)
-    chunk_of = np.empty(n, dtype=np.int64)
-    for c, (a, b) in enumerate(bounds):
-        chunk_of[a:b] = c
-    ci, cj = chunk_of[work.edge_from], chunk_of[work.edge_to]
-    lo, hi = np.minimum(ci, cj), np.maximum(ci, cj)
-    order = np.argsort(lo * len(bounds) + hi, kind="stable")
-    edge_from, edge_to = work.edge_from[order], work.edge_to[order]
-    model = EdgeModel(work.measurements[order], work.information[order])
-    blocks = [poses[a:b].reshape(-1) for a, b in bounds]
-    snapshot = _Snapshot(poses, edge_from, edge_to, model, options.huber_scale, len(bounds))
-
-    problem = pyceres.Problem()
-    problem.add_residual_block(_SnapshotCost(snapshot, [blk.size for blk in blocks]), None, blocks)
     chunk_start = np.array([a for a, _ in bounds], dtype=np.int64)
     chunk_len = np.array([b - a for a, b in bounds], dtype=np.int64)
-    for plan in _plan_groups(edge_from, edge_to, chunk_of, chunk_start, chunk_len):
+    chunk_of = np.repeat(np.arange(len(bounds), dtype=np.int64), chunk_len)
+    ci, cj = chunk_of[graph.edge_from], chunk_of[graph.edge_to]
+    lo, hi = np.minimum(ci, cj), np.maximum(ci, cj)
+    order = np.argsort(lo * len(bounds) + hi, kind="stable")
+    edge_from, edge_to = graph.edge_from[order], graph.edge_to[order]
+    model = EdgeModel(graph.measurements[order], graph.information[order])
+    blocks = [poses[a:b].reshape(-1) for a, b in bounds]
+    sizes = [3 * (b - a) for a, b in bounds]
+    plan = _plan_groups(edge_from, edge_to, chunk_of, chunk_start, chunk_len)
+    snapshot = _Snapshot(poses, edge_from, edge_to, model, options.huber_scale, plan, len(bounds))
+
+    problem = pyceres.Problem()
+    problem.add_residual_block(_SnapshotCost(snapshot, sizes), None, blocks)
+    for group, chunks in enumerate(plan.group_chunks):
         problem.add_residual_block(
-            _EdgeGroupCost(snapshot, plan, chunk_len), None, [blocks[c] for c in plan.chunks]
+            _EdgeGroupCost(snapshot, plan, group, [sizes[c] for c in chunks]),
+            None,
+            [blocks[c] for c in chunks],
         )
     for c, (a, b) in enumerate(bounds):
         if b - a == 1 and fixed[a]:

@@ -227,6 +227,34 @@ class EventLog:
             self._truth_frames += 1
         self._n_frames = f + 1
 
+    def extend(
+        self,
+        columns: Mapping[str, NDArray[Any]],
+        frame_end: NDArray[np.int64] | Sequence[int],
+        frame_time: NDArray[np.float64] | Sequence[float],
+    ) -> None:
+        """Append frames given as event columns (as :meth:`columns` gives them), no truth.
+
+        ``frame_end`` counts events from the start of the log (as :attr:`frame_end` does); what
+        is appended is what another log holds after this one's events and frames (a copy kept
+        in step, e.g. in a worker process).
+        """
+        n = self._n_events
+        m = int(np.asarray(columns["kind"]).shape[0])
+        self._reserve_events(n + m)
+        for name in _EVENT_COLUMNS:
+            getattr(self, "_" + name)[n : n + m] = np.asarray(columns[name])
+        self._score[n : n + m] = np.asarray(columns["score"]) if "score" in columns else np.nan
+        ends = np.asarray(frame_end, dtype=np.int64)
+        f, g = self._n_frames, int(ends.shape[0])
+        if g and (ends[0] < n or ends[-1] != n + m or np.any(np.diff(ends) < 0)):
+            raise ValueError("frame ends do not match the events appended")
+        self._reserve_frames(f + g)
+        self._frame_end[f : f + g] = ends
+        self._frame_time[f : f + g] = np.asarray(frame_time, dtype=np.float64)
+        self._has_truth[f : f + g] = False
+        self._n_events, self._n_frames = n + m, f + g
+
     def _reserve_events(self, n: int) -> None:
         cap = self._kind.shape[0]
         if n > cap:

@@ -62,7 +62,7 @@ def differs(a: object, b: object) -> bool:
 
 
 def wait(app: CogmapApp) -> None:
-    assert app.replay.wait_idle(60), "the replay did not settle"
+    assert app.wait_idle(60), "the replay did not settle"
 
 
 def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSession) -> None:
@@ -75,7 +75,7 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
             assert_same_map(r.session.maps[mode], reference.maps[mode])
         compact = reference.maps[MapMode.COMPACT]
         assert counter(app, "frames") == f"{reference.log.frames} / {reference.log.frames}"
-        assert counter(app, "vertices") == str(compact.num_vertices)
+        assert counter(app, "compact-vertices") == str(compact.num_vertices)
         assert counter(app, "compact-edges") == str(compact.num_edges)
         assert counter(app, "compact-clusters") == str(len(compact.clusters))
         assert counter(app, "compact-optimizations") == str(len(compact.optimizations))
@@ -85,6 +85,17 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
         assert counter(app, "compact-correctness") == f"{fidelity.correctness:.3f}"
         links = sum(1 for e in reference.log.events if type(e).__name__ == "LinkToVertex")
         assert counter(app, "loops-detected") == str(links)
+        score = reference.loop_closure_score()
+        assert counter(app, "loops-false") == str(score.false)
+        for mode in MapMode:  # where the proposals went, per map
+            c = reference.maps[mode].counters
+            assert counter(app, f"{mode.value}-proposed") == str(c.proposed)
+            assert counter(app, f"{mode.value}-declined") == str(c.declined)
+            assert counter(app, f"{mode.value}-integrated") == str(c.integrated)
+            assert counter(app, f"{mode.value}-short_edges") == str(c.short_edges)
+            assert c.proposed - c.declined - c.integrated - c.short_edges == (
+                reference.maps[mode].num_vertices
+            )
         # the scene shows exactly the compact map's vertices and the whole ground truth
         layer = app.streamer.layers[MapMode.COMPACT]
         assert layer.vertices.num_items == compact.num_vertices
@@ -92,9 +103,9 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
         assert shown is not None
         np.testing.assert_allclose(shown[:, :2], compact.snapshot().poses[:, :2], atol=1e-6)
         assert layer.sequential.num_items + layer.loops.num_items == compact.num_edges
-        assert app.streamer.ground_truth.path.num_items == reference.log.frames - 1
+        assert layer.truth.num_items == reference.log.frames - 1
         # the size chart ends at the maps' final sizes (standard V, E, ..., compact V, E)
-        last = [float(series[-1]) for series in app.chart.data[1:]]
+        last = [float(series[-1]) for series in app.chart.data[1:7]]
         expected = []
         for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
             expected += [reference.maps[mode].num_vertices, reference.maps[mode].num_edges]
@@ -118,7 +129,7 @@ def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: S
                     assert app.replay.session.maps[mode] is before[mode]
             assert any(differs(before[m], expected[m]) for m in MapMode), name
             compact = expected[MapMode.COMPACT]
-            assert counter(app, "vertices") == str(compact.num_vertices)
+            assert counter(app, "compact-vertices") == str(compact.num_vertices)
             assert counter(app, "compact-clusters") == str(len(compact.clusters))
             assert app.streamer.layers[MapMode.COMPACT].vertices.num_items == compact.num_vertices
             record = app.replay.rebuilds[-1]
@@ -128,7 +139,8 @@ def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: S
             assert app.replay.params == paper
             for mode in MapMode:
                 assert_same_map(app.replay.session.maps[mode], reference.maps[mode])
-            assert counter(app, "vertices") == str(reference.maps[MapMode.COMPACT].num_vertices)
+            compact = reference.maps[MapMode.COMPACT]
+            assert counter(app, "compact-vertices") == str(compact.num_vertices)
 
 
 @pytest.mark.parametrize(
@@ -278,7 +290,10 @@ def test_seek_and_restart_replay_from_the_cache(short_bag: Path, reference: Slam
     with running_app(short_bag) as app:
         wait(app)
         frontend_frames = app.replay.session.frontend.frames
-        app.play_button.value = True  # pause: a seek while playing plays on from there
+        assert app.replay.state is PlaybackState.ENDED and app.play_button.label == "play"
+        assert f"{PlaybackState.ENDED.value}</b> · t = " in app.status_html.content  # no speed
+        app.replay.pause()  # a seek while playing plays on from there
+        wait(app)
         assert not app.replay.playing and app.play_button.label == "play"
         for t in (20.0, 50.0, 5.0):
             app.seek_slider.value = t
@@ -289,7 +304,7 @@ def test_seek_and_restart_replay_from_the_cache(short_bag: Path, reference: Slam
             for mode in MapMode:
                 assert_same_map(app.replay.session.maps[mode], expected[mode])
             assert counter(app, "frames") == f"{k} / {app.replay.total_frames}"
-            assert app.streamer.ground_truth.path.num_items == k - 1
+            assert app.streamer.layers[MapMode.COMPACT].truth.num_items == k - 1
         app.seek_slider.value = 1e9  # clamped to the end
         wait(app)
         assert app.replay.state is PlaybackState.ENDED
@@ -416,7 +431,7 @@ def test_a_bag_corrupt_mid_replay_keeps_what_was_mapped(
         wait(app)
         expected = reference.rebuild(MapParams(delta=6.0), frames=cursor, finish=False)
         assert_same_map(r.session.maps[MapMode.COMPACT], expected[MapMode.COMPACT])
-        assert counter(app, "vertices") == str(expected[MapMode.COMPACT].num_vertices)
+        assert counter(app, "compact-vertices") == str(expected[MapMode.COMPACT].num_vertices)
 
 
 def test_twenty_clients_at_once_and_abrupt_disconnects_do_not_disturb_playback(
@@ -461,14 +476,17 @@ def test_a_late_client_receives_the_full_current_map(
         with buffer.buffer_lock:
             messages = list(buffer.message_from_id.values())
         for mode in MapMode:
-            clouds = [
-                m
-                for m in messages
-                if type(m).__name__ == "PointCloudMessage"
-                and m.name.startswith(f"/map/{mode.value}/vertices/")
-            ]
-            assert len({m.name for m in clouds}) == len(clouds)
-            total = sum(m.props.points.shape[0] for m in clouds)
+            prefix = f"/map/{mode.value}/vertices/"
+            points: dict[str, int] = {}  # the latest state of each chunk a late client gets
+            for m in messages:
+                kind = type(m).__name__
+                if kind == "PointCloudMessage" and m.name.startswith(prefix):
+                    assert m.name not in points  # one node per chunk
+                    points[m.name] = m.props.points.shape[0]
+                elif kind == "SceneNodeUpdateMessage" and m.name.startswith(prefix):
+                    if "points" in m.updates:  # a chunk updated in place
+                        points[m.name] = len(m.updates["points"])
+            total = sum(points.values())
             shown = mode is MapMode.COMPACT  # hidden maps are sent when first shown
             assert total == (reference.maps[mode].num_vertices if shown else 0)
         with _client(app.server.get_port()) as ws:
@@ -572,56 +590,72 @@ def test_bad_gui_values_are_refused_before_any_client_sees_them(
         port = app.server.get_port()
         with _client(port) as sender, _client(port) as viewer:
             _say_hello(sender)
+            _wait_clients(app, 1)
+            (sender_id,) = app.server.get_clients()
             _say_hello(viewer)
             _wait_clients(app, 2)
             _drain(viewer)
+            mine = app.views[sender_id]
             refused = app.gate.refused
-            bad = [
-                (app.mode_dropdown, {"value": "bogus"}),
-                (app.compare_dropdown, {"value": "nope"}),
+            shared = [
                 (app.speed_dropdown, {"value": "bogus"}),
-                (app.truth_checkbox, {"value": "bogus"}),  # viser would make it True
                 (app.seek_slider, {"value": float("inf")}),
                 (app.param_sliders["alpha"], {"value": "many"}),
+                (app.param_boxes["delta"], {"value": 12}),
                 (app.replay_path, {"value": 12}),
                 (app.play_button, {"value": False}),
                 (app.play_button, {"disabled": True}),  # not a client's to change
                 (app.param_sliders["delta"], {"max": 1e9}),
+                (app.param_boxes["delta"], {"value": "abc"}),  # last: its message stays
             ]
-            for handle, updates in bad:
+            own = [
+                (mine.mode_dropdown, {"value": "bogus"}),
+                (mine.colouring_dropdown, {"value": "nope"}),
+                (mine.layer_checkboxes["truth"], {"value": "bogus"}),  # viser would make it True
+                (mine.pin_button, {"value": False}),
+            ]
+            for handle, updates in shared + own:
                 _send(sender, handle, updates)
             deadline = time.monotonic() + 10
-            while app.gate.refused < refused + len(bad) and time.monotonic() < deadline:
+            while (
+                app.gate.refused < refused + len(shared) or mine.gate.refused < len(own)
+            ) and time.monotonic() < deadline:
                 time.sleep(0.01)
-            assert app.gate.refused == refused + len(bad)
-            attacked = {h._impl.uuid for h, _ in bad}  # type: ignore[attr-defined]
+            assert app.gate.refused == refused + len(shared)
+            assert mine.gate.refused == len(own)
+            attacked = {h._impl.uuid for h, _ in shared}  # type: ignore[attr-defined]
             seen = [(uuid, u) for uuid, u in _drain(viewer) if uuid in attacked]
             # the viewer only ever sees the values in force, sent back after each refusal
             values = {repr(u.get("value")) for _, u in seen}
-            assert values and not values & {"'bogus'", "'nope'", "inf", "'many'", "12"}
+            assert values and not values & {"'bogus'", "inf", "'many'", "'abc'", "12"}
             assert all(set(u) == {"value"} for _, u in seen)
-            assert app.mode_dropdown.value == "compact" and app.compare_dropdown.value == "standard"
-            assert app.speed_dropdown.value == "max" and app.truth_checkbox.value is True
+            assert app.speed_dropdown.value == "max" and app.param_boxes["delta"].value == "3.746"
+            assert mine.mode_dropdown.value == "compact" and mine.state.layers["truth"] is True
+            assert mine.colouring_dropdown.value == "loop closures by cluster"
             assert app.param_sliders["delta"].max == 30.0
             assert not app.play_button.disabled
             assert app.replay.params == MapParams()
-            assert _buffered(app, app.mode_dropdown) in (None, "compact")
-            # a valid value still works, and every viewer's controls keep working
-            _send(sender, app.mode_dropdown, {"value": "standard"})
+            message = html.unescape(app.params_md.content)
+            assert "refused δ: 'abc' is not a number; δ stays 3.746" in message
+            # a valid value still works -- for the viewer who sent it only
+            _send(sender, mine.mode_dropdown, {"value": "standard"})
             deadline = time.monotonic() + 10
-            while app.streamer.shown != (MapMode.STANDARD,) and time.monotonic() < deadline:
+            while mine.state.shown != (MapMode.STANDARD,) and time.monotonic() < deadline:
                 time.sleep(0.01)
-            assert app.streamer.shown == (MapMode.STANDARD,)
-            assert "standard" in {u.get("value") for _, u in _drain(viewer)}
-        app.truth_checkbox.value = False
-        sent: list[str] = []
+            assert mine.state.shown == (MapMode.STANDARD,)
+            other = next(v for cid, v in app.views.items() if cid != sender_id)
+            assert other.state.shown == (MapMode.COMPACT,)
+            assert "standard" not in {u.get("value") for _, u in _drain(viewer)}
+            sent: list[str] = []
 
-        class FakeClient:
-            def send_file_download(self, name: str, content: bytes, **_: object) -> None:
-                sent.append(name)
+            class FakeClient:
+                client_id = sender_id
 
-        app._download(FakeClient(), "g2o")  # type: ignore[arg-type]
-        assert sent == ["standard.g2o"]
+                def send_file_download(self, name: str, content: bytes, **_: object) -> None:
+                    sent.append(name)
+
+            app._download(FakeClient(), "g2o")  # type: ignore[arg-type]
+            assert sent == ["standard.g2o"]  # the map this viewer shows
 
 
 def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Path) -> None:
@@ -632,7 +666,7 @@ def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Pa
             "delta": app.param_sliders["delta"].value,
             "seek": app.seek_slider.value,
             "speed": app.speed_dropdown.value,
-            "map": app.mode_dropdown.value,
+            "box": app.param_boxes["delta"].value,
         }
         refused = app.gate.refused
         with _client(app.server.get_port()) as ws:  # never says hello
@@ -640,7 +674,7 @@ def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Pa
             _send(ws, app.param_sliders["delta"], {"value": 1.0})
             _send(ws, app.seek_slider, {"value": float("inf")})
             _send(ws, app.speed_dropdown, {"value": "bogus"})
-            _send(ws, app.mode_dropdown, {"value": "standard"})  # valid, but not yet a client
+            _send(ws, app.param_boxes["delta"], {"value": "5"})  # valid, but not yet a client
             deadline = time.monotonic() + 10
             while app.gate.refused < refused + 5 and time.monotonic() < deadline:
                 time.sleep(0.01)
@@ -650,7 +684,7 @@ def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Pa
             "delta": app.param_sliders["delta"].value,
             "seek": app.seek_slider.value,
             "speed": app.speed_dropdown.value,
-            "map": app.mode_dropdown.value,
+            "box": app.param_boxes["delta"].value,
         }
         assert after == before
         assert app.replay.params == MapParams()

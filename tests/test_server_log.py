@@ -38,7 +38,7 @@ def reference(square_log: Path) -> SlamSession:
 
 
 def wait(app: CogmapApp) -> None:
-    assert app.replay.wait_idle(60), "the replay did not settle"
+    assert app.wait_idle(60), "the replay did not settle"
 
 
 def test_a_log_replays_with_link_scores_and_no_camera(

@@ -8,7 +8,21 @@ import numpy as np
 import pytest
 import viser
 
-from app.server.scene import CHUNK, ChunkedNodes, MapLayer, SceneStreamer, StreamStats
+from app.server.scene import (
+    CHUNK,
+    FALSE_LOOP_COLOR,
+    MAP_COLORS,
+    ROBOT_COLOR,
+    SEQUENTIAL_COLOR,
+    ChunkedNodes,
+    MapExtras,
+    MapLayer,
+    SceneStreamer,
+    StreamStats,
+    _lab,
+    cluster_color,
+    edge_errors,
+)
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry
@@ -151,4 +165,77 @@ def test_side_by_side_shows_the_second_map_beside_the_first(server: viser.ViserS
     assert layers[MapMode.COMPACT].offset == 0.0
     streamer.show((MapMode.STANDARD,), show_ground_truth=False)
     assert layers[MapMode.STANDARD].offset == 0.0 and not layers[MapMode.COMPACT].visible
-    assert not streamer.ground_truth.visible
+    assert not layers[MapMode.STANDARD].groups["truth"].visible
+
+
+def test_cluster_colours_are_distinct_and_apart_from_the_other_colours() -> None:
+    colours = [cluster_color(c) for c in range(26)]  # the default dataset's 26 clusters
+    assert len(set(colours)) == 26  # (a 10-colour palette repeated after 10)
+    lab = _lab(np.array(colours, dtype=float))
+    apart = np.linalg.norm(lab[:, None] - lab[None], axis=2)
+    np.fill_diagonal(apart, np.inf)
+    assert apart.min() > 20  # every pair clearly different (CIE L*a*b*)
+    assert min(apart[k, k + 1] for k in range(25)) > 30  # neighbours in id very different
+    reserved = [*MAP_COLORS.values(), SEQUENTIAL_COLOR, ROBOT_COLOR, FALSE_LOOP_COLOR]
+    gap = np.linalg.norm(lab[:, None] - _lab(np.array(reserved, dtype=float))[None], axis=2)
+    assert gap.min() > 20  # no cluster looks like a map, the grey edges, the robot, a false link
+    assert all(max(c) - min(c) > 60 for c in colours)  # saturated: no grey
+
+
+def test_edge_colourings_are_streamed_only_when_a_viewer_uses_them(
+    server: viser.ViserServer,
+) -> None:
+    streamer = SceneStreamer(server)
+    cmap = CognitiveMap(MapMode.STANDARD)
+    cmap.apply_all(circle_events(800, laps=2))
+    cmap.finish()
+    streamer.show((MapMode.STANDARD,))
+    streamer.publish({MapMode.STANDARD: cmap}, duration=40.0)
+    layer = streamer.layers[MapMode.STANDARD]
+    loops, sequential = cmap.num_loop_edges, cmap.num_edges - cmap.num_loop_edges
+    assert layer.edges["loop/cluster"].num_items == loops > 0
+    assert layer.edges["sequential/cluster"].num_items == sequential
+    assert layer.edges["loop/time"].num_items == 0 and layer.edges["loop/error"].num_items == 0
+    colors = layer.edges["sequential/cluster"].colors()
+    assert colors is not None and (colors == SEQUENTIAL_COLOR).all()
+    loop_colors = layer.edges["loop/cluster"].colors()
+    snap = cmap.snapshot()
+    clusters = snap.edge_cluster[snap.edge_kind == 1]
+    assert loop_colors is not None
+    for k, cid in enumerate(clusters.tolist()):
+        assert tuple(loop_colors[k, 0]) == cluster_color(cid)
+    streamer.set_needed({MapMode.STANDARD}, {"time", "error"}, False)
+    streamer.publish({MapMode.STANDARD: cmap}, duration=40.0)
+    assert layer.edges["loop/time"].num_items == loops
+    assert layer.edges["sequential/error"].num_items == sequential
+    errors = edge_errors(cmap)
+    assert errors.shape == (cmap.num_edges,) and np.isfinite(errors).all()
+    # time colours go from the start colour to the end colour of the ramp
+    time_colors = layer.edges["sequential/time"].colors()
+    assert time_colors is not None
+    assert not np.array_equal(time_colors[0, 0], time_colors[-1, 0])
+
+
+def test_false_loop_closures_truth_alignment_and_vertex_size(server: viser.ViserServer) -> None:
+    streamer = SceneStreamer(server)
+    dense = CognitiveMap(MapMode.STANDARD)
+    dense.apply_all(circle_events(800, laps=2))
+    dense.finish()
+    snap = dense.snapshot()
+    loop_times = snap.edge_time[snap.edge_kind == 1]
+    false = loop_times[::3]
+    extras = MapExtras((0.3, 1.0, -2.0), false)
+    streamer.show((MapMode.STANDARD,))
+    streamer.publish({MapMode.STANDARD: dense}, extras={MapMode.STANDARD: extras})
+    layer = streamer.layers[MapMode.STANDARD]
+    assert layer.false_count == layer.false_loops.num_items == false.size
+    assert tuple(layer.truth_frame.position) == (1.0, -2.0, 0.0)
+    w, x, y, z = layer.truth_frame.wxyz
+    assert np.isclose(2 * np.arctan2(z, w), 0.3)
+    # dense maps get small vertices (a third of the typical edge), sparse ones the largest
+    assert layer.point_size == pytest.approx(round(14.0 / 400 / 3 / 0.002) * 0.002)
+    sparse = CognitiveMap(MapMode.STANDARD)
+    sparse.apply_all(circle_events(40, laps=1))
+    streamer.show((MapMode.COMPACT,))
+    streamer.publish({MapMode.COMPACT: sparse})
+    assert streamer.layers[MapMode.COMPACT].point_size == 0.03

@@ -150,7 +150,10 @@ def test_serve_shows_the_resumed_maps_and_keeps_growing_them(
         assert r.cursor == base and r.state is PlaybackState.PAUSED
         for mode in MapMode:  # the resumed maps, shown at once
             assert_same_map(r.session.maps[mode], day1_session.maps[mode])
-        assert counter(app, "vertices") == str(day1_session.maps[MapMode.COMPACT].num_vertices)
+        assert app.wait_idle(60)
+        assert counter(app, "compact-vertices") == str(
+            day1_session.maps[MapMode.COMPACT].num_vertices
+        )
         app.play_button.value = True
         assert r.wait_idle(60) and r.state is PlaybackState.ENDED
         assert r.cursor == back_to_back.log.frames == r.total_frames

@@ -1,12 +1,31 @@
 """The live web app (``cogmap serve``): a viser page that replays a bag and tunes the maps live.
 
 - :mod:`app.server.replay` -- the worker thread owning the SLAM session (playback, rebuilds).
+- :mod:`app.server.rebuild` -- rebuilding maps for new parameters (worker processes, cache).
 - :mod:`app.server.scene` -- incremental streaming of the maps into the 3-D scene.
-- :mod:`app.server.app` -- the page: panels, controls, counters, chart, log, export buttons.
+- :mod:`app.server.view` -- each viewer's own view (map, layers, camera, inspection, pin).
+- :mod:`app.server.app` -- the page: panels, controls, counters, chart, exports.
 - :mod:`app.server.export` -- g2o, summary.json, sizes.csv and the self-contained HTML replay.
+
+Nothing is imported here, so that a rebuild worker process (``python -m app.server.rebuild``)
+loads only what it needs.
 """
 
-from app.server.app import CogmapApp
-from app.server.replay import PlaybackState, Replay
+from __future__ import annotations
+
+from typing import Any
 
 __all__ = ["CogmapApp", "PlaybackState", "Replay"]
+
+
+def __getattr__(name: str) -> Any:
+    """``CogmapApp``, ``PlaybackState`` and ``Replay``, imported when first used."""
+    if name == "CogmapApp":
+        from app.server.app import CogmapApp
+
+        return CogmapApp
+    if name in ("PlaybackState", "Replay"):
+        from app.server import replay
+
+        return getattr(replay, name)
+    raise AttributeError(name)

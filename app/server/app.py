@@ -1,13 +1,18 @@
-"""The live web app: a viser GUI around the replay worker and the scene streamer.
+"""The live web app: a viser page around the replay worker, the scene streamer and each viewer.
 
-:class:`CogmapApp` builds the page (folders: status, view, playback, live, map parameters,
-map size, clusters and optimisations, export), implements the worker's
+:class:`CogmapApp` builds the page, implements the worker's
 :class:`~app.server.replay.ReplayListener` and rate-limits what it sends: the map at most
 ``scene_hz`` times per second during playback (always at once after a rebuild, a seek, a step or
-the end), counters and the camera image likewise, the size chart once per second.
+the end), counters and the camera image likewise, the size chart and the accuracy figures once
+per second.
 
-All state is global (``server.gui``/``server.scene``): every client sees the same page, and a
-client joining late is sent the current state by viser.
+What is shared and what is each viewer's:
+
+- **shared** (the page's global GUI, one state for every browser): playback, the map parameters,
+  the status, the live counters of the three maps, the size chart, exports, opening a bag;
+- **each viewer's** (:class:`~app.server.view.ClientView`): which map is shown (side by side or
+  not), layers, edge colours, the camera, inspection, the pinned map to compare with, the
+  cluster legend and optimisation log of the shown map.
 """
 
 from __future__ import annotations
@@ -15,10 +20,11 @@ from __future__ import annotations
 import html
 import logging
 import math
+import os
+import re
 import threading
 import time
 import traceback
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +32,8 @@ import numpy as np
 import viser
 import viser.uplot
 
+from app.server.assets import head_html, help_markdown
+from app.server.chart import chart_data, chart_options, chart_series, y_top
 from app.server.export import (
     default_replay_path,
     g2o_bytes,
@@ -33,18 +41,28 @@ from app.server.export import (
     sizes_csv_bytes,
     summary_bytes,
 )
-from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
-from app.server.scene import (
-    MAP_COLORS,
-    SceneStreamer,
-    cluster_color,
+from app.server.figures import MapFigures, false_link_times, map_figures
+from app.server.params import (
+    ADVANCED_SLIDERS,
+    ALL_SLIDERS,
+    SLIDERS,
+    SPECS,
+    SliderSpec,
+    check_spec,
+    clamp_to_slider,
+    format_value,
+    parse_typed,
+    typed_check,
 )
-from app.server.validation import GuiGate, boolean, choice, click, number, text
+from app.server.rebuild import make_builder
+from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
+from app.server.scene import MapExtras, SceneStreamer, cluster_color
+from app.server.validation import Adjusted, GuiGate, Refused, choice, click, number, text
+from app.server.view import ClientView, Pick, nearest_pick, swatch
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
-from cogmap_core.config import MapParams, parameter_range
-from cogmap_core.datasets import BagTopics
-from cogmap_core.errors import CogmapError, ParameterError
-from cogmap_core.evaluation import LayoutFidelity
+from cogmap_core.config import MapParams
+from cogmap_core.datasets import BagTopics, open_bag
+from cogmap_core.errors import CogmapError
 from cogmap_core.event_file import KIND_LINK
 from cogmap_core.events import LinkToVertex
 from cogmap_core.frames import EventStep, Frame
@@ -52,9 +70,12 @@ from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import EventLog, SlamSession
 from cogmap_core.sources.detect import LogOptions
 
+__all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
+
 log = logging.getLogger(__name__)
 
 MODE_LABELS: dict[str, MapMode] = {m.value: m for m in MapMode}
+ORDER = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 SPEEDS: dict[str, float] = {
     "0.25x": 0.25,
     "0.5x": 0.5,
@@ -65,7 +86,8 @@ SPEEDS: dict[str, float] = {
     "20x": 20.0,
     "max": math.inf,
 }
-CHART_POINTS = 400
+#: A viewer joining after this much data was replayed is told so (s).
+LATE_JOIN_S = 5.0
 RECENT_LINKS = 8
 
 
@@ -90,52 +112,6 @@ def recent_links(log: EventLog, frames: int, count: int) -> list[tuple[float, in
     ]
 
 
-@dataclass(frozen=True, slots=True)
-class SliderSpec:
-    """A map-parameter slider: label, parameter name, range and step."""
-
-    label: str
-    name: str
-    low: float
-    high: float
-    step: float
-    hint: str
-
-
-#: The tuning sliders (ranges inside the valid parameter ranges of :class:`MapParams`).
-SLIDERS: tuple[SliderSpec, ...] = (
-    SliderSpec("α", "alpha", 0.0, 50.0, 0.1, "translation weight of the neighborhood field (1/m)"),
-    SliderSpec("β", "beta", 0.0, 50.0, 0.1, "rotation weight of the neighborhood field (1/rad)"),
-    SliderSpec("δ", "delta", 1.05, 30.0, 0.001, "add a vertex only when g(d, θ) > δ"),
-    SliderSpec("T_interval", "t_interval", 0.1, 20.0, 0.1, "cluster interval threshold (s)"),
-    SliderSpec("T_total", "t_total", 1.0, 500.0, 1.0, "cluster total-time threshold (s)"),
-)
-ADVANCED_SLIDERS: tuple[SliderSpec, ...] = (
-    SliderSpec("Huber scale", "huber_scale", 0.01, 2.0, 0.01, "Huber loss scale (m, rad)"),
-    SliderSpec(
-        "short edge (m)", "short_edge_threshold", 0.0, 0.5, 0.005, "edges shorter are removed"
-    ),
-)
-
-
-def _check_spec(spec: SliderSpec) -> None:
-    low, inclusive, high = parameter_range(spec.name)
-    ok_low = spec.low >= low if inclusive else spec.low > low
-    if not (ok_low and spec.high <= high):
-        raise ParameterError(f"slider {spec.name} range [{spec.low}, {spec.high}] is invalid")
-
-
-def clamp_to_slider(spec: SliderSpec, value: float) -> float | None:
-    """``value`` clamped into the slider's range; None when it is not a finite number."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return None
-    if not math.isfinite(v):
-        return None
-    return min(max(v, spec.low), spec.high)
-
-
 def _log_refusal(message: str) -> None:
     log.warning("GUI value from a client %s", message)
 
@@ -153,8 +129,14 @@ class _RateLimit:
         return False
 
 
+def _share(value: float | None) -> str:
+    if value is None or math.isnan(value):
+        return "–"
+    return f"{value:.3f}"
+
+
 class CogmapApp:
-    """The page and its behaviour for one replay.
+    """The page and its behaviour for one replay (module doc).
 
     Args:
         server: the viser server to build the page on.
@@ -164,10 +146,13 @@ class CogmapApp:
             bag's profile, as ``cogmap run``).
         speed: initial playback speed.
         autoplay: start playing as soon as the bag is open.
-        static_dir: default folder for saved HTML replays.
+        static_dir: folder of the page's assets; HTML replays go to its ``replays/``.
         scene_hz: maximum map updates per second during playback.
         image_scale: JPEG decode reduction (1, 2, 4, 8).
         topics: the bag's topic names.
+        rebuild_workers: worker processes that rebuild maps after a parameter change
+            (:mod:`app.server.rebuild`; 0: on the replay's thread).
+        wait_for_viewer: with ``autoplay``, start playing when the first browser connects.
         fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
         log: how to read a log (ignored for bags).
         defaults: what "reset" returns to (default: the paper's values; for logs, the
@@ -189,6 +174,8 @@ class CogmapApp:
         scene_hz: float = 10.0,
         image_scale: int = 4,
         topics: BagTopics | None = None,
+        rebuild_workers: int = 2,
+        wait_for_viewer: bool = False,
         fmt: str | None = None,
         log: LogOptions | None = None,
         defaults: MapParams | None = None,
@@ -196,54 +183,112 @@ class CogmapApp:
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
         self.defaults = defaults or MapParams()
-        for spec in SLIDERS + ADVANCED_SLIDERS:
-            _check_spec(spec)
+        for spec in ALL_SLIDERS:
+            check_spec(spec)
         self.server = server
         self.static_dir = static_dir
-        self.started_at = time.monotonic()
-        self._scene_lock = threading.RLock()
+        self.scene_lock = threading.RLock()
         self._scene_limit = _RateLimit(scene_hz)
         self._status_limit = _RateLimit(4.0)
+        self._seek_box_limit = _RateLimit(1.0)
         self._image_limit = _RateLimit(scene_hz)
         self._chart_limit = _RateLimit(1.0)
-        self._ate_limit = _RateLimit(1.0)
-        self._ate: dict[MapMode, float | None] = {}
-        self._fidelity: dict[MapMode, LayoutFidelity | None] = {}
-        self._log_key: tuple[Any, ...] | None = None
+        self._figures_limit = _RateLimit(1.0)
+        self._views_limit = _RateLimit(2.0)
+        self._figures: dict[MapMode, MapFigures] = {}
+        self._figures_key: dict[MapMode, tuple[int, ...]] = {}
+        self.stats_version = 0
+        self._false_times = np.zeros(0)
+        self._false_key: tuple[int, int] | None = None
+        self._odometry_key: tuple[int, int] | None = None
+        self._odometry = np.zeros((0, 3))
         self._links_counted = (0, 0)  # (events counted, LinkToVertex among them)
         self._suppress_param_events = False
-        self._camera_extent: tuple[float, float, float, float] | None = None
+        self._setting = threading.local()
         self._pending_frame: tuple[Frame, int | None] | None = None
-        self._local = threading.local()
+        self.status_note = ""
+        self._typed: dict[str, tuple[str, str]] = {}  # box -> (normal text, message)
+        self._default_modes: tuple[MapMode, ...] = (MapMode.COMPACT,)
+        self.views: dict[int, ClientView] = {}
         self.exports: list[Path] = []
-        self.replay = Replay(
-            bag,
-            self,
-            params=params,
-            frontend=frontend,
-            speed=speed,
-            autoplay=autoplay,
-            image_scale=image_scale,
-            topics=topics,
-            fmt=fmt,
-            log=log,
-            resume=resume,
+        self._frontend = frontend
+        self._topics = topics
+        self._image_scale = image_scale
+        self._workers = rebuild_workers
+        self._autoplay = autoplay
+        self._waiting_for_viewer = autoplay and wait_for_viewer
+        self._switch_lock = threading.Lock()
+        self._connect_lock = threading.Lock()
+        self._figures_cond = threading.Condition()
+        self._figures_todo: set[MapMode] = set()
+        self._figures_stop = False
+        self._figures_busy = False
+        threading.Thread(target=self._figures_loop, name="cogmap-figures", daemon=True).start()
+        self.started_at = time.monotonic()
+        self.replay = self._make_replay(
+            bag, params, speed, autoplay and not wait_for_viewer, fmt=fmt, log=log, resume=resume
         )
         if resume is not None:
             params = resume[0].params
         self.streamer = SceneStreamer(server)
         self._build_gui(params or MapParams(), speed, autoplay)
         self._guard_inputs()
-        self._apply_view()
+        server.on_client_connect(self._on_connect)
+        server.on_client_disconnect(self._on_disconnect)
+        self.show_maps(MapMode.COMPACT)
+
+    def _make_replay(
+        self,
+        bag: BagSource,
+        params: MapParams | None,
+        speed: float,
+        autoplay: bool,
+        fmt: str | None = None,
+        log: LogOptions | None = None,
+        resume: tuple[SlamSession, SessionMeta] | None = None,
+    ) -> Replay:
+        return Replay(
+            bag,
+            self,
+            params=params,
+            frontend=self._frontend,
+            speed=speed,
+            autoplay=autoplay,
+            image_scale=self._image_scale,
+            topics=self._topics,
+            builder=make_builder(self._workers),
+            fmt=fmt,
+            log=log,
+            resume=resume,
+        )
+
+    def _defaults_name(self) -> str:
+        return "paper values" if self.defaults == MapParams() else "defaults"
 
     # ================================================================== lifecycle
     def start(self) -> None:
         """Start replaying."""
         self.replay.start()
 
+    def wait_idle(self, timeout: float = 60.0) -> bool:
+        """Wait until the replay is idle and the page caught up with it (scripts and tests)."""
+        deadline = time.monotonic() + timeout
+        if not self.replay.wait_idle(timeout):
+            return False
+        while time.monotonic() < deadline:
+            with self._figures_cond:
+                done = not self._figures_todo and not self._figures_busy
+            if done:
+                return True
+            time.sleep(0.01)
+        return False
+
     def stop(self) -> None:
         """Stop the replay worker (the server is stopped by its owner)."""
         self.replay.stop()
+        with self._figures_cond:
+            self._figures_stop = True
+            self._figures_cond.notify()
 
     # ================================================================== GUI
     def _build_gui(self, params: MapParams, speed: float, autoplay: bool) -> None:
@@ -254,30 +299,14 @@ class CogmapApp:
             brand_color=(30, 140, 60),
         )
         gui.set_panel_label("cogmap · compact cognitive map")
+        self.head_html = gui.add_html(head_html(self.static_dir))
         self.status_html = gui.add_html(self._status_content())
 
-        with gui.add_folder("View"):
-            self.mode_dropdown = gui.add_dropdown(
-                "map", tuple(MODE_LABELS), initial_value=MapMode.COMPACT.value
-            )
-            self.compare_checkbox = gui.add_checkbox("side by side", False)
-            self.compare_dropdown = gui.add_dropdown(
-                "compare with", tuple(MODE_LABELS), initial_value=MapMode.STANDARD.value
-            )
-            self.truth_checkbox = gui.add_checkbox("ground truth", True)
-            self.top_button = gui.add_button("top view", icon=viser.Icon.MAP_2)
-            self.view3d_button = gui.add_button("3-D view", icon=viser.Icon.VIEW_360)
-        for handle in (
-            self.mode_dropdown,
-            self.compare_checkbox,
-            self.compare_dropdown,
-            self.truth_checkbox,
-        ):
-            handle.on_update(lambda _: self._apply_view())
-        self.top_button.on_click(lambda event: self._set_camera(event.client, top=True))
-        self.view3d_button.on_click(lambda event: self._set_camera(event.client, top=False))
+        self.view_folder = gui.add_folder("View — yours")
+        self.inspect_folder = gui.add_folder("Inspect — yours")
+        self.compare_folder = gui.add_folder("Compare with a pinned map — yours")
 
-        with gui.add_folder("Playback"):
+        with gui.add_folder("Playback — shared"):
             self.play_button = gui.add_button(
                 "pause" if autoplay else "play",
                 icon=viser.Icon.PLAYER_PAUSE if autoplay else viser.Icon.PLAYER_PLAY,
@@ -289,14 +318,16 @@ class CogmapApp:
             self.step_button = gui.add_button("step one frame", icon=viser.Icon.PLAYER_TRACK_NEXT)
             self.restart_button = gui.add_button("restart", icon=viser.Icon.PLAYER_SKIP_BACK)
             self.seek_slider = gui.add_slider("seek (s)", 0.0, 1.0, 0.1, 0.0)
+            self.seek_box = gui.add_text("go to (s)", "0", hint="type a data time, then Enter")
             self.progress = gui.add_progress_bar(0.0)
         self.play_button.on_click(lambda _: self._toggle_play())
         self.speed_dropdown.on_update(lambda _: self._on_speed())
         self.step_button.on_click(lambda _: self.replay.step())
         self.restart_button.on_click(lambda _: self.replay.restart())
         self.seek_slider.on_update(lambda _: self._on_seek())
+        self.seek_box.on_update(lambda _: self._on_seek_box())
 
-        with gui.add_folder("Live"):
+        with gui.add_folder("Live — shared"):
             self.camera_image = gui.add_image(
                 np.zeros((60, 104, 3), dtype=np.uint8), label="camera", format="jpeg"
             )
@@ -304,43 +335,32 @@ class CogmapApp:
             self.links_html = gui.add_html("")  # logs: the latest links and their scores
             self.counters_html = gui.add_html("")
 
-        with gui.add_folder("Map parameters"):
+        with gui.add_folder("Map parameters — shared"):
             self.param_sliders: dict[str, viser.GuiSliderHandle[float]] = {}
+            self.param_boxes: dict[str, viser.GuiTextHandle] = {}
             for spec in SLIDERS:
-                self._add_param_slider(spec, params)
+                self._add_param(spec, params)
             with gui.add_folder("Advanced", expand_by_default=False):
                 for spec in ADVANCED_SLIDERS:
-                    self._add_param_slider(spec, params)
+                    self._add_param(spec, params)
             label = "reset to paper values" if self.defaults == MapParams() else "reset to defaults"
             self.reset_button = gui.add_button(label, icon=viser.Icon.RESTORE)
-            self.params_md = gui.add_markdown("")
+            self.params_md = gui.add_html(self._params_message(self._defaults_name()))
         self.reset_button.on_click(lambda _: self.reset_params())
 
+        with gui.add_folder("Help", expand_by_default=False):
+            self.help_md = gui.add_markdown(help_markdown(self.static_dir))
+
         with gui.add_folder("Map size"):
-            series: list[viser.uplot.Series] = [{"label": "t (s)"}]
-            for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
-                r, g, b = MAP_COLORS[mode]
-                series.append(
-                    {"label": f"{mode.value} V", "stroke": f"rgb({r},{g},{b})", "width": 2}
-                )
-                series.append(
-                    {
-                        "label": f"{mode.value} E",
-                        "stroke": f"rgb({r},{g},{b})",
-                        "width": 1,
-                        "dash": (5.0, 4.0),
-                    }
-                )
             self.chart = gui.add_uplot(
-                tuple(np.zeros(1) for _ in range(7)),
-                tuple(series),
-                title="vertices (solid) and edges (dashed)",
-                aspect=1.4,
+                tuple(np.zeros(1) for _ in range(len(chart_series()))),
+                chart_series(),
+                title="vertices (solid), edges (dashed), optimisations (dots)",
+                aspect=1.3,
+                **chart_options(),  # type: ignore[arg-type]
             )
 
-        with gui.add_folder("Clusters & optimisations"):
-            self.legend_html = gui.add_html("")
-            self.log_md = gui.add_markdown("no optimisation yet")
+        self.clusters_folder = gui.add_folder("Clusters & optimisations — yours")
 
         with gui.add_folder("Export"):
             self.g2o_button = gui.add_button("download map (.g2o)", icon=viser.Icon.DOWNLOAD)
@@ -350,24 +370,26 @@ class CogmapApp:
                 "replay file", str(default_replay_path(self.static_dir, MapMode.COMPACT))
             )
             self.replay_button = gui.add_button("save HTML replay", icon=viser.Icon.DEVICE_FLOPPY)
-            self.export_md = gui.add_markdown("")
+            self.export_md = gui.add_html("")
         self.g2o_button.on_click(lambda event: self._download(event.client, "g2o"))
         self.summary_button.on_click(lambda event: self._download(event.client, "summary"))
         self.sizes_button.on_click(lambda event: self._download(event.client, "sizes"))
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
+        with gui.add_folder("Open another bag — shared", expand_by_default=False):
+            self.bag_box = gui.add_text("bag path", "", hint="a .bag file on the server")
+            self.open_button = gui.add_button("open", icon=viser.Icon.FOLDER_OPEN)
+            self.open_md = gui.add_html(
+                '<div class="cogmap-note" id="cogmap-open">A path on the server; the replay '
+                "starts over with it, for everyone.</div>"
+            )
+        self.open_button.on_click(lambda _: self.open_bag(self.bag_box.value))
+
     def _guard_inputs(self) -> None:
         """Check every value a client can send before viser applies it (see validation.py)."""
         gate = self.gate = GuiGate(self.server, note=_log_refusal)
-        maps = tuple(MODE_LABELS)
-        gate.guard(self.mode_dropdown, choice(maps))
-        gate.guard(self.compare_dropdown, choice(maps))
         gate.guard(self.speed_dropdown, choice(tuple(SPEEDS)))
-        gate.guard(self.compare_checkbox, boolean())
-        gate.guard(self.truth_checkbox, boolean())
         for button in (
-            self.top_button,
-            self.view3d_button,
             self.play_button,
             self.step_button,
             self.restart_button,
@@ -376,89 +398,132 @@ class CogmapApp:
             self.summary_button,
             self.sizes_button,
             self.replay_button,
+            self.open_button,
         ):
             gate.guard(button, click())
         gate.guard(self.seek_slider, number(0.0, lambda: float(self.seek_slider.max)))
-        for spec in SLIDERS + ADVANCED_SLIDERS:
+        gate.guard(self.seek_box, self._seek_check(), note=self._seek_note)
+        for spec in ALL_SLIDERS:
             gate.guard(
                 self.param_sliders[spec.name], number(spec.low, spec.high), note=self._param_note
             )
+            gate.guard(
+                self.param_boxes[spec.name],
+                self._box_check(spec),
+                label=f"{spec.label} box",
+                note=self._param_note,
+            )
         gate.guard(self.replay_path, text())
+        gate.guard(self.bag_box, text())
 
-    def _param_note(self, message: str) -> None:
-        self.params_md.content = message
-
-    def _add_param_slider(self, spec: SliderSpec, params: MapParams) -> None:
+    def _add_param(self, spec: SliderSpec, params: MapParams) -> None:
         value = clamp_to_slider(spec, getattr(params, spec.name))
+        value = spec.low if value is None else value
         slider = self.server.gui.add_slider(
             spec.label,
             min=spec.low,
             max=spec.high,
             step=spec.step,
-            initial_value=spec.low if value is None else value,
+            initial_value=value,
             hint=spec.hint,
         )
-        slider.on_update(lambda _: self._on_param(spec))
+        box = self.server.gui.add_text(
+            f"{spec.label} =", format_value(value), hint=f"type {spec.label}, then Enter"
+        )
+        slider.on_update(lambda _: self._on_slider(spec))
+        box.on_update(lambda _: self._on_box(spec))
         self.param_sliders[spec.name] = slider
+        self.param_boxes[spec.name] = box
 
-    # ------------------------------------------------------------------ view
-    @property
-    def shown_modes(self) -> tuple[MapMode, ...]:
-        """The displayed map and, side by side, the compared one."""
-        first = MODE_LABELS.get(self.mode_dropdown.value, MapMode.COMPACT)
-        if self.compare_checkbox.value:
-            second = MODE_LABELS.get(self.compare_dropdown.value, MapMode.STANDARD)
-            if second is not first:
-                return (first, second)
-        return (first,)
-
-    def _apply_view(self) -> None:
-        modes = self.shown_modes
-        self.replay.set_priority(modes)
-        with self.replay.lock, self._scene_lock:
-            self.streamer.show(modes, self.truth_checkbox.value)
-            self._publish_scene()
-            self._update_counters()
-            self._update_log(force=True)
+    # ------------------------------------------------------------------ default view
+    def show_maps(self, *modes: MapMode) -> None:
+        """The view of the page before (or without) a viewer of its own: scripts and tests."""
+        self._default_modes = tuple(modes) or (MapMode.COMPACT,)
+        with self.replay.lock, self.scene_lock:
+            self.streamer.show(self._default_modes)
+            self.views_changed()
         defaults = {str(default_replay_path(self.static_dir, m)) for m in MapMode}
         if self.replay_path.value in defaults:  # keep a path the user typed
             self.replay_path.value = str(default_replay_path(self.static_dir, modes[0]))
 
-    def _set_camera(self, client: viser.ClientHandle | None, top: bool) -> None:
-        position, look_at = self._camera_pose(top)
-        clients = [client] if client is not None else list(self.server.get_clients().values())
-        for c in clients:
-            with c.atomic():
-                c.camera.position = position
-                c.camera.look_at = look_at
+    @property
+    def shown_modes(self) -> tuple[MapMode, ...]:
+        """The maps of the default view."""
+        return self._default_modes
 
-    def _camera_pose(self, top: bool) -> tuple[tuple[float, float, float], tuple[float, ...]]:
-        extent = self.streamer.extent() or (-0.5, 3.5, -0.5, 2.5)
-        cx, cy = (extent[0] + extent[1]) / 2, (extent[2] + extent[3]) / 2
-        span = max(extent[1] - extent[0], extent[3] - extent[2], 1.0)
-        if top:
-            return (cx, cy - 0.05 * span, 0.9 * span + 0.4), (cx, cy, 0.0)
-        return (cx + 0.5 * span, cy - 0.9 * span, 0.8 * span), (cx, cy, 0.0)
+    def views_changed(self) -> None:
+        """Stream what the views show (a view changed); the shown maps rebuild first."""
+        with self.replay.lock, self.scene_lock:
+            views = list(self.views.values())
+            shown: list[MapMode] = []
+            for modes in [v.state.shown for v in views] + [self._default_modes]:
+                for mode in modes:
+                    if mode not in shown:
+                        shown.append(mode)
+            colourings = {v.state.colouring for v in views}
+            odometry = any(v.state.layers["odometry"] for v in views)
+            self.streamer.set_needed(shown, colourings, odometry)
+            self.replay.set_priority(tuple(shown))
+            self._publish_scene()
 
-    def _update_initial_camera(self) -> None:
-        extent = self.streamer.extent()
-        if extent is None:
-            return
-        old = self._camera_extent
-        if old is not None and all(abs(a - b) < 0.5 for a, b in zip(old, extent, strict=True)):
-            return
-        self._camera_extent = extent
-        position, look_at = self._camera_pose(top=True)
-        self.server.initial_camera.position = position
-        self.server.initial_camera.look_at = look_at
+    # ------------------------------------------------------------------ viewers
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        if self._waiting_for_viewer:
+            self._waiting_for_viewer = False
+            self.replay.play()
+            self._sync_play_button()
+        with self._connect_lock:  # (the shared folders are entered to place the view's controls)
+            view = ClientView(self, client)
+            self.views[client.client_id] = view
+        r = self.replay
+        if not math.isnan(r.frame_time) and r.frame_time > LATE_JOIN_S and r.playing:
+            started = time.monotonic() - self.started_at
+            with self._connect_lock, self.view_folder:
+                client.gui.add_html(
+                    f'<div class="cogmap-note" id="cogmap-late">This replay started '
+                    f"{started:.0f} s ago and is at t = {r.frame_time:.0f} s of the data: "
+                    "<b>restart</b> (Playback) to watch it from the beginning.</div>",
+                    order=-1.0,
+                )
+        self._update_status(force=True)
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        view = self.views.pop(client.client_id, None)
+        if view is not None:
+            view.close()
+            self.views_changed()
+
+    def pick(self, view: ClientView, point: np.ndarray, tolerance: float) -> Pick | None:
+        """The vertex or edge of the view's maps nearest to ``point`` (world x, y)."""
+        offsets = view.offsets()
+        best = None
+        with self.replay.lock:
+            for mode in view.state.shown:
+                local = point - np.array([offsets[mode.value], 0.0])
+                found = nearest_pick(
+                    self.replay.session.maps[mode],
+                    mode,
+                    local,
+                    tolerance,
+                    self._false_times,
+                    self.streamer.layers[mode].point_size / 2,
+                )
+                if found is not None and (best is None or found[0] < best[0]):
+                    best = found
+        return None if best is None else best[1]
 
     # ------------------------------------------------------------------ playback
     def _toggle_play(self) -> None:
-        if self.replay.playing:
-            self.replay.pause()
+        r = self.replay
+        if r.state is PlaybackState.ENDED or r.at_end:
+            r.restart()  # "play" at the end plays again from the start
+            r.play()
+        elif r.playing:
+            r.pause()
         else:
-            self.replay.play()
+            r.play()
         self._sync_play_button()
+        self._update_status(force=True)
 
     def _sync_play_button(self) -> None:
         playing = self.replay.playing and self.replay.state is not PlaybackState.ENDED
@@ -473,9 +538,10 @@ class CogmapApp:
             self.speed_dropdown.value = "1x"
             return
         self.replay.set_speed(speed)
+        self._update_status(force=True)
 
     def _on_seek(self) -> None:
-        if getattr(self._local, "setting_seek", False):
+        if getattr(self._setting, "seek", False):
             return  # the slider following playback, not a user
         value = self.seek_slider.value
         if not math.isfinite(value):
@@ -487,45 +553,153 @@ class CogmapApp:
             return
         self.replay.seek(clamped)
 
+    def _seek_check(self) -> Any:
+        def check(value: object) -> object:
+            if not isinstance(value, str):
+                raise Refused(f"{value!r} is not text")
+            spec = SliderSpec("seek", "seek", 0.0, float(self.seek_slider.max), 0.1, "")
+            typed = parse_typed(spec, value)
+            normal = format_value(round(typed.value, 1))
+            return Adjusted(normal, typed.message) if normal != value else normal
+
+        return check
+
+    def _seek_note(self, message: str) -> None:
+        self.status_note = message
+        self._update_status(force=True)
+
+    def _on_seek_box(self) -> None:
+        if getattr(self._setting, "seek", False):
+            return
+        try:
+            value = float(self.seek_box.value)
+        except ValueError:
+            return
+        if math.isfinite(value):
+            self.replay.seek(min(max(value, 0.0), float(self.seek_slider.max)))
+
     # ------------------------------------------------------------------ parameters
-    def _on_param(self, spec: SliderSpec) -> None:
+    def _params_message(self, text: str, error: bool = False) -> str:
+        cls = "cogmap-note cogmap-error" if error else "cogmap-note"
+        return f'<div class="{cls}" id="cogmap-params-message">{html.escape(text)}</div>'
+
+    def _param_note(self, message: str) -> None:
+        error = message.startswith("refused")
+        # the gate's "refused δ box: 'abc' is not a number; kept '3.746'" reads better as
+        # "refused δ: 'abc' is not a number; δ stays 3.746"
+        found = re.fullmatch(r"refused (.+?)(?: box)?: (.*); kept '?(.*?)'?", message)
+        if found is not None:
+            label, reason, kept = found.groups()
+            message = f"refused {label}: {reason}; {label} stays {kept}"
+        self.params_md.content = self._params_message(message, error)
+
+    def _set_quietly(self, handle: Any, value: Any) -> None:
+        self._suppress_param_events = True
+        try:
+            handle.value = value
+        finally:
+            self._suppress_param_events = False
+
+    def _on_slider(self, spec: SliderSpec) -> None:
         if self._suppress_param_events:
             return
         slider = self.param_sliders[spec.name]
         value = clamp_to_slider(spec, slider.value)
         if value is None:  # refuse: back to the value in use
             current = getattr(self.replay.params, spec.name)
-            self.params_md.content = f"refused {spec.name} = {slider.value!r}: not a number"
-            slider.value = clamp_to_slider(spec, current) or spec.low
+            self.params_md.content = self._params_message(
+                f"refused {spec.label} = {slider.value!r}: not a number; "
+                f"{spec.label} stays {format_value(current)}",
+                error=True,
+            )
+            self._set_quietly(slider, clamp_to_slider(spec, current) or spec.low)
             return
         if value != slider.value:
-            self.params_md.content = (
-                f"{spec.name} = {slider.value!r} is outside [{spec.low:g}, {spec.high:g}]: "
-                f"clamped to {value:g}"
+            self.params_md.content = self._params_message(
+                f"{spec.label} = {slider.value!r} is outside [{format_value(spec.low)}, "
+                f"{format_value(spec.high)}]: using {format_value(value)}"
             )
-            slider.value = value  # calls this again with the clamped value
-            return
+            self._set_quietly(slider, value)
+        else:
+            self.params_md.content = self._params_message(f"{spec.label} = {format_value(value)}")
+        self._set_quietly(self.param_boxes[spec.name], format_value(value))
         self.request_params()
 
+    def _box_check(self, spec: SliderSpec) -> Any:
+        """The box's check, remembering how the text was read (its message names the range)."""
+        check = typed_check(spec)
+
+        def remembered(value: object) -> object:
+            self._typed.pop(spec.name, None)
+            result = check(value)
+            if isinstance(result, Adjusted):
+                self._typed[spec.name] = (result.value, result.message)
+            return result
+
+        return remembered
+
+    def _on_box(self, spec: SliderSpec) -> None:
+        if self._suppress_param_events:
+            return
+        box = self.param_boxes[spec.name]
+        try:
+            typed = parse_typed(spec, box.value)
+        except Refused as exc:  # only a value set without the gate can get here
+            current = getattr(self.replay.params, spec.name)
+            self.params_md.content = self._params_message(
+                f"refused {spec.label}: {exc}; {spec.label} stays {format_value(current)}",
+                error=True,
+            )
+            self._set_quietly(box, format_value(current))
+            return
+        message = typed.message
+        remembered = self._typed.pop(spec.name, None)
+        if remembered is not None and remembered[0] == box.value:
+            message = remembered[1]  # what was typed, before the gate normalised it
+        self.params_md.content = self._params_message(message)
+        self._set_quietly(box, format_value(typed.value))
+        self._set_quietly(self.param_sliders[spec.name], typed.value)
+        self.request_params()
+
+    def type_param(self, name: str, typed: str) -> None:
+        """``typed`` entered into a parameter's box, as a browser sends it (scripts and tests)."""
+        spec = SPECS[name]
+        box = self.param_boxes[name]
+        try:
+            value = self._box_check(spec)(typed)
+        except Refused as exc:
+            current = getattr(self.replay.params, spec.name)
+            self._param_note(f"refused {spec.label} box: {exc}; kept {format_value(current)!r}")
+            return
+        message = None
+        if isinstance(value, Adjusted):
+            value, message = value.value, value.message
+        if box.value == value:  # viser runs no callback for an unchanged value
+            self._on_box(spec)
+        else:
+            box.value = value
+        if message is not None and self._typed.pop(spec.name, None) is not None:
+            self._param_note(message)  # (the box's callback did not run)
+
     def current_slider_params(self) -> MapParams:
-        """The parameters the sliders show, each clamped into its slider's range.
+        """The parameters the controls show, each clamped into its slider's range.
 
         A value that is not a finite number keeps the parameter in use. (A client can set a
         slider's value without its callback running, so every slider is checked here.)
         """
         params = self.replay.params
         values: dict[str, float] = {}
-        for spec in SLIDERS + ADVANCED_SLIDERS:
+        for spec in ALL_SLIDERS:
             value = clamp_to_slider(spec, self.param_sliders[spec.name].value)
             values[spec.name] = getattr(params, spec.name) if value is None else value
         return params.with_changes(**values)
 
     def request_params(self) -> None:
-        """Rebuild the maps for the sliders' values (latest wins)."""
+        """Rebuild the maps for the controls' values (latest wins)."""
         try:
             params = self.current_slider_params()
         except CogmapError as exc:
-            self.params_md.content = f"refused: {exc}"
+            self.params_md.content = self._params_message(f"refused: {exc}", error=True)
             return
         if params != self.replay.params:
             self.replay.set_params(params)
@@ -537,9 +711,10 @@ class CogmapApp:
         try:
             for name, slider in self.param_sliders.items():
                 slider.value = getattr(defaults, name)
+                self.param_boxes[name].value = format_value(getattr(defaults, name))
         finally:
             self._suppress_param_events = False
-        self.params_md.content = "paper values" if defaults == MapParams() else "defaults"
+        self.params_md.content = self._params_message(self._defaults_name())
         if self.replay.params != defaults:
             self.replay.set_params(defaults)
 
@@ -564,10 +739,12 @@ class CogmapApp:
         if isinstance(frame, EventStep):  # a log: no camera; the latest links' scores instead
             self._show_links(frame)
             return
+        r = self.replay
         self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
-            f"view template **{template}** · frame {frame.index} · t = {frame.time:.2f} s"
+            f"view template **{template}** · frame {r.cursor} / {r.total_frames} · "
+            f"t = {frame.time:.2f} s"
         )
 
     def _show_links(self, step: EventStep) -> None:
@@ -597,22 +774,113 @@ class CogmapApp:
             return
         if forced:
             self._show_frame()
-        with self._scene_lock:
+        with replay.lock, self.scene_lock:
+            self._update_figures(forced, modes)
+            self._update_counters()  # first: the browser shows text at once, geometry later
             self._publish_scene()
-            self._update_counters(forced)
-            self._update_log()
             if self._chart_limit.due(forced):
                 self._update_chart()
+            if self._views_limit.due(forced):
+                for view in list(self.views.values()):
+                    try:
+                        view.refresh()
+                    except Exception:  # a tab that went away must not stop the others
+                        traceback.print_exc()
         self._update_status()
-        self._update_initial_camera()
 
     # ------------------------------------------------------------------ page content
+    def _update_figures(self, forced: bool, modes: tuple[MapMode, ...]) -> None:
+        """Ask for the accuracy figures of the maps (1 Hz; at once for rebuilt maps).
+
+        They take some 30 ms per map (the layout fidelity most), so they are computed on their
+        own thread (:meth:`_figures_loop`) after the map is shown, and the page follows.
+        """
+        if forced:
+            todo: tuple[MapMode, ...] = modes
+        elif self._figures_limit.due():
+            todo = ORDER
+        else:
+            return
+        with self._figures_cond:
+            self._figures_todo.update(todo)
+            self._figures_cond.notify()
+
+    def _figures_loop(self) -> None:
+        while True:
+            with self._figures_cond:
+                while not self._figures_todo and not self._figures_stop:
+                    self._figures_cond.wait(0.5)
+                if self._figures_stop:
+                    return
+                todo = [m for m in ORDER if m in self._figures_todo]
+                self._figures_todo.clear()
+                self._figures_busy = True
+            try:
+                self._compute_figures(todo)
+            except Exception:  # a figure must never stop the page
+                traceback.print_exc()
+            finally:
+                with self._figures_cond:
+                    self._figures_busy = False
+
+    def _compute_figures(self, modes: list[MapMode]) -> None:
+        replay = self.replay
+        changed = False
+        with replay.lock:
+            log_ = replay.session.log
+            key = (id(log_), log_.frames)
+            if key != self._false_key:
+                self._false_key = key
+                self._false_times = false_link_times(log_, replay.session.evaluation)
+                changed = True
+            for mode in modes:
+                cmap = replay.session.maps[mode]
+                mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
+                        log_.frames)  # fmt: skip
+                if self._figures_key.get(mode) == mkey:
+                    continue
+                figures = map_figures(log_, cmap, replay.session.evaluation)
+                with self.scene_lock:
+                    self._figures_key[mode] = mkey
+                    self._figures[mode] = figures
+                    self.stats_version += 1
+                changed = True
+        if not changed:
+            return
+        with replay.lock, self.scene_lock:
+            self._publish_scene()  # the truth's alignment, the false loop closures
+            self._update_counters()
+            for view in list(self.views.values()):
+                try:
+                    view.refresh()
+                except Exception:
+                    traceback.print_exc()
+
+    def _dead_reckoning(self) -> np.ndarray:
+        log_ = self.replay.session.log
+        frames = min(self.replay.cursor, log_.frames)
+        key = (id(log_), frames)
+        if key != self._odometry_key:
+            self._odometry_key = key
+            self._odometry = log_.dead_reckoning()[:frames]
+        return self._odometry
+
     def _publish_scene(self) -> None:
         session = self.replay.session
-        log = session.log
-        truth = log.ground_truth if len(log.ground_truth) else None
-        count = min(self.replay.cursor, len(log.ground_truth))
-        self.streamer.publish(dict(session.maps.maps), truth, count)
+        log_ = session.log
+        truth = log_.ground_truth if len(log_.ground_truth) else None
+        count = min(self.replay.cursor, len(log_.ground_truth))
+        extras = {
+            mode: MapExtras(
+                self._figures[mode].truth_transform if mode in self._figures else None,
+                self._false_times,
+            )
+            for mode in MapMode
+        }
+        odometry = self._dead_reckoning() if self.streamer.show_odometry else None
+        self.streamer.publish(
+            dict(session.maps.maps), truth, count, extras, odometry, self.replay.duration
+        )
 
     def _status_content(self) -> str:
         r = getattr(self, "replay", None)
@@ -626,26 +894,31 @@ class CogmapApp:
             PlaybackState.ENDED: "#34659f",
             PlaybackState.ERROR: "#b00020",
         }[state]
-        speed = "max" if math.isinf(r.speed) else f"{r.speed:g}×"
         t = 0.0 if math.isnan(r.frame_time) else r.frame_time
         bag = html.escape(r.bag_path.name) if r.bag_path else "–"
-        parts = [f'<b style="color:{color}">{state.value}</b>']
+        label = state.value
+        if self._waiting_for_viewer and state is PlaybackState.PAUSED:
+            label = "waiting for the first viewer"
+        parts = [f'<b style="color:{color}">{label}</b>']
+        if state is PlaybackState.PLAYING:
+            parts.append("max speed" if math.isinf(r.speed) else f"{r.speed:g}×")
         if state is not PlaybackState.ERROR:
-            parts.append(f"{speed} · t = {t:.1f} / {r.duration:.1f} s · {bag}")
-        text = " · ".join(parts)
+            parts.append(f"t = {t:.1f} / {r.duration:.1f} s · {bag}")
+        text_ = " · ".join(parts)
         message = ""
-        if r.message:
-            color = "#b00020" if state is PlaybackState.ERROR else "#555"
+        note = getattr(self, "status_note", "")
+        if r.message or note:
+            mcolor = "#b00020" if state is PlaybackState.ERROR or note else "#555"
             message = (
-                f'<div id="cogmap-message" style="color:{color};font-size:0.85em;'
-                f'white-space:normal">{html.escape(r.message)}</div>'
+                f'<div id="cogmap-message" style="color:{mcolor};font-size:0.85em;'
+                f'white-space:normal">{html.escape(r.message or note)}</div>'
             )
         return (
             f'<div id="cogmap-status" data-state="{state.value}" '
-            f'style="padding:0.3em 0.6em;font-size:0.9em">{text}{message}</div>'
+            f'style="padding:0.3em 0.6em;font-size:0.9em">{text_}{message}</div>'
         )
 
-    def _update_status(self) -> None:
+    def _update_status(self, force: bool = False) -> None:
         content = self._status_content()
         if self.status_html.content != content:
             self.status_html.content = content
@@ -659,85 +932,37 @@ class CogmapApp:
             fraction = 100.0
         if abs(self.progress.value - fraction) >= 0.1:
             self.progress.value = fraction
-        if r.state in (PlaybackState.PAUSED, PlaybackState.ENDED) and not math.isnan(r.frame_time):
+        if not math.isnan(r.frame_time) and r.state is not PlaybackState.LOADING:
             position = round(min(r.frame_time, self.seek_slider.max), 1)
-            if abs(self.seek_slider.value - position) > 0.05:
-                self._local.setting_seek = True  # (callbacks run on this thread)
-                try:
+            self._setting.seek = True  # (callbacks run on this thread)
+            try:
+                if abs(self.seek_slider.value - position) > 0.05:
                     self.seek_slider.value = position
-                finally:
-                    self._local.setting_seek = False
+                playing = r.state is PlaybackState.PLAYING
+                if self._seek_box_limit.due(force or not playing):
+                    self.seek_box.value = format_value(position)
+            finally:
+                self._setting.seek = False
         self._sync_play_button()
 
     def _loop_closures_detected(self) -> int:
-        log = self.replay.session.log
+        log_ = self.replay.session.log
         k = self.replay.cursor
-        end = log.frame_end[k - 1] if k else 0
+        end = log_.frame_end[k - 1] if k else 0
         counted, links = self._links_counted
         if end < counted:
             counted, links = 0, 0
-        links += sum(1 for e in log.events[counted:end] if isinstance(e, LinkToVertex))
+        links += sum(1 for e in log_.events[counted:end] if isinstance(e, LinkToVertex))
         self._links_counted = (end, links)
         return links
 
-    def _update_counters(self, forced: bool = True) -> None:
-        r = self.replay
-        session = r.session
-        modes = self.streamer.shown
-        if self._ate_limit.due(forced):
-            self._ate = {m: session.ate(session.maps[m]) for m in modes}
-            radius = session.evaluation.layout_radius  # the input kind's (8 cm for bags)
-            self._fidelity = {m: session.layout_fidelity(session.maps[m], radius) for m in modes}
-        t = 0.0 if math.isnan(r.frame_time) else r.frame_time
-        rows = [
-            ("time", "time", f"{t:.1f} / {r.duration:.1f} s"),
-            ("frames", "frames", f"{r.cursor} / {r.total_frames}"),
-            ("loops-detected", "loop closures detected", str(self._loop_closures_detected())),
-        ]
-        head = "".join(f"<th>{html.escape(m.value)}</th>" for m in modes)
-        body = "".join(
-            f'<tr><td>{label}</td><td colspan="{len(modes)}" id="cogmap-{key}">{value}</td></tr>'
-            for key, label, value in rows
-        )
-        per_map: list[tuple[str, str, list[str]]] = []
-        stats = [
-            self._map_counts(session.maps[m], self._ate.get(m), self._fidelity.get(m))
-            for m in modes
-        ]
-        radius = f"{session.evaluation.layout_radius * 100:g} cm"
-        for key, label in (
-            ("vertices", "vertices"),
-            ("edges", "edges"),
-            ("loops", "loop-closure edges"),
-            ("clusters", "clusters"),
-            ("optimizations", "optimizations"),
-            ("ate", "ATE (m)"),
-            ("completeness", f"completeness ({radius})"),
-            ("correctness", f"correctness ({radius})"),
-        ):
-            per_map.append((key, label, [s[key] for s in stats]))
-        body += f"<tr><td></td>{head}</tr>"
-        for key, label, values in per_map:
-            cells = "".join(
-                f'<td id="cogmap-{m.value}-{key}">{v}</td>'
-                for m, v in zip(modes, values, strict=True)
-            )
-            primary = f'<span id="cogmap-{key}" hidden>{values[0]}</span>'
-            body += f"<tr><td>{label}{primary}</td>{cells}</tr>"
-        content = (
-            '<table id="cogmap-counters" style="width:100%;font-size:0.85em;'
-            'font-variant-numeric:tabular-nums">' + body + "</table>"
-        )
-        if self.counters_html.content != content:
-            self.counters_html.content = content
-
-    @staticmethod
-    def _map_counts(
-        cmap: CognitiveMap, ate: float | None, fidelity: LayoutFidelity | None
-    ) -> dict[str, str]:
-        def share(value: float | None) -> str:
-            return "–" if value is None or math.isnan(value) else f"{value:.3f}"
-
+    def map_figures(self, mode: MapMode, cmap: CognitiveMap) -> dict[str, str]:
+        """A map's figures as the page writes them."""
+        figures = self._figures.get(mode)
+        fidelity = None if figures is None else figures.fidelity
+        ate = None if figures is None else figures.ate
+        c = cmap.counters
+        false = self.streamer.layers[mode].false_count if mode in self.streamer.layers else 0
         return {
             "vertices": str(cmap.num_vertices),
             "edges": str(cmap.num_edges),
@@ -745,81 +970,154 @@ class CogmapApp:
             "clusters": str(len(cmap.clusters)),
             "optimizations": str(len(cmap.optimizations)),
             "ate": "–" if ate is None else f"{ate:.3f}",
-            "completeness": share(None if fidelity is None else fidelity.completeness),
-            "correctness": share(None if fidelity is None else fidelity.correctness),
+            "completeness": _share(None if fidelity is None else fidelity.completeness),
+            "correctness": _share(None if fidelity is None else fidelity.correctness),
+            "proposed": str(c.proposed),
+            "declined": str(c.declined),
+            "integrated": str(c.integrated),
+            "short_edges": str(c.short_edges),
+            "refused": str(c.refused_relocalisations),
+            "false": str(false),
         }
 
-    def _update_chart(self) -> None:
-        session = self.replay.session
-        order = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
-        histories = [session.maps[m].size_history() for m in order]
-        end = self.replay.data_time  # session data time (the bag's time when not resuming)
-        end = 0.0 if math.isnan(end) else end
-        times = np.linspace(0.0, max(end, 1e-3), CHART_POINTS)
-        data: list[np.ndarray] = [times]
-        for t, v, e in histories:
-            idx = np.searchsorted(t, times, side="right") - 1
-            ok = idx >= 0
-            data.append(np.where(ok, v[np.maximum(idx, 0)] if v.size else 0, 0).astype(float))
-            data.append(np.where(ok, e[np.maximum(idx, 0)] if e.size else 0, 0).astype(float))
-        self.chart.data = tuple(data)
+    def _update_counters(self) -> None:
+        r = self.replay
+        session = r.session
+        t = 0.0 if math.isnan(r.frame_time) else r.frame_time
+        rows = [
+            ("time", "time", f"{t:.1f} / {r.duration:.1f} s"),
+            ("frames", "frames", f"{r.cursor} / {r.total_frames}"),
+            ("loops-detected", "loop closures detected", str(self._loop_closures_detected())),
+            ("loops-false", "… of them false (ground truth)", str(self._false_times.size)),
+        ]
+        n = len(ORDER)
+        body = "".join(
+            f'<tr><td>{label}</td><td colspan="{n}" id="cogmap-{key}">{value}</td></tr>'
+            for key, label, value in rows
+        )
+        figures = {m: self.map_figures(m, session.maps[m]) for m in ORDER}
+        radius = f"{session.evaluation.layout_radius * 100:g} cm"  # the input kind's
+        sections = (
+            (
+                "size",
+                (
+                    ("vertices", "vertices"),
+                    ("edges", "edges"),
+                    ("loops", "loop-closure edges"),
+                    ("clusters", "clusters"),
+                    ("optimizations", "optimisations"),
+                ),
+            ),
+            (
+                "accuracy",
+                (
+                    ("ate", "ATE (m)"),
+                    ("completeness", f"completeness ({radius})"),
+                    ("correctness", f"correctness ({radius})"),
+                    ("false", "false loop closures in the map"),
+                ),
+            ),
+            (
+                "where the proposals went",
+                (
+                    ("proposed", "vertices proposed"),
+                    ("declined", "declined by neighborhood fields"),
+                    ("integrated", "merged by scene integration"),
+                    ("short_edges", "removed as short edges"),
+                    ("refused", "relocalisations refused"),
+                ),
+            ),
+        )
+        head = "".join(f"<th>{html.escape(m.value.replace('_', ' '))}</th>" for m in ORDER)
+        for title, keys in sections:
+            body += f'<tr class="cogmap-section"><td colspan="{n + 1}">{title}</td></tr>'
+            for key, label in keys:
+                cells = "".join(
+                    f'<td id="cogmap-{m.value}-{key}">{figures[m][key]}</td>' for m in ORDER
+                )
+                body += f"<tr><td>{label}</td>{cells}</tr>"
+        content = (
+            f'<table class="cogmap-table" id="cogmap-counters"><thead><tr><th></th>{head}'
+            f"</tr></thead><tbody>{body}</tbody></table>"
+        )
+        if self.counters_html.content != content:
+            self.counters_html.content = content
 
-    def _update_log(self, force: bool = False) -> None:
-        mode = self.streamer.shown[0] if self.streamer.shown else MapMode.COMPACT
-        cmap = self.replay.session.maps[mode]
-        key = (id(cmap), mode, len(cmap.optimizations), len(cmap.clusters), cmap.num_loop_edges)
-        if key == self._log_key and not force:
-            return
-        self._log_key = key
-        snap_clusters: list[int] = []
+    def _update_chart(self) -> None:
+        maps = dict(self.replay.session.maps.maps)
+        data = chart_data(maps, self.replay.data_time)  # session time (bag time unless resuming)
+        top = y_top(max(float(np.max(series)) for series in data[1:7]))
+        with self.server.atomic():
+            if self.chart.scales != chart_options(top)["scales"]:
+                self.chart.scales = chart_options(top)["scales"]  # type: ignore[assignment]
+            self.chart.data = data
+            series = chart_series(maps)
+            if tuple(self.chart.series) != series:
+                self.chart.series = series
+
+    def cluster_log_html(self, mode: MapMode, cmap: CognitiveMap) -> str:
+        """The cluster colour legend and the optimisation log of one map (a view's)."""
+        clusters: list[int] = []
         if cmap.num_loop_edges:
             snap = cmap.snapshot()
             loops = snap.edge_cluster[snap.edge_kind == EdgeKind.LOOP_CLOSURE]
-            snap_clusters = sorted(set(loops.tolist()))
-        swatches = []
-        for cid in snap_clusters[-24:]:
-            r, g, b = cluster_color(cid)
-            swatches.append(
-                f'<span style="display:inline-block;margin:1px 4px 1px 0">'
-                f'<span style="display:inline-block;width:10px;height:10px;'
-                f'background:rgb({r},{g},{b});margin-right:2px"></span>{cid}</span>'
-            )
-        legend = (
-            f'<div id="cogmap-legend" style="font-size:0.8em">'
-            f"<b>{mode.value}</b>: loop-closure edges by cluster id "
-            f"({len(snap_clusters)} cluster(s) with edges in the map)<br>"
-            + ("".join(swatches) or "none yet")
-            + "</div>"
+            clusters = sorted(set(loops.tolist()))
+        swatches = "".join(
+            f'<span style="display:inline-block;margin:1px 5px 1px 0">'
+            f"{swatch(cluster_color(c))}{c}</span>"
+            for c in clusters[-40:]
         )
-        self.legend_html.content = legend
-        lines = [
-            f"**{len(cmap.clusters)}** clusters, **{len(cmap.optimizations)}** optimisations "
-            f"({sum(o.wall_s for o in cmap.optimizations):.2f} s in total)",
-            "",
-            "| t (s) | cluster | edges in cluster | V | iters | ms | merged | short |",
-            "|---:|---:|---:|---:|---:|---:|---:|---:|",
-        ]
+        legend = (
+            f'<div class="cogmap-note" id="cogmap-cluster-legend"><b>{mode.value}</b>: '
+            f"loop-closure edges by cluster ({len(clusters)} cluster(s) with edges in the map)"
+            f"<br>{swatches or 'none yet'}</div>"
+        )
+        total = sum(o.wall_s for o in cmap.optimizations)
+        summary = (
+            f'<div class="cogmap-note"><b>{len(cmap.clusters)}</b> clusters, '
+            f"<b>{len(cmap.optimizations)}</b> optimisations ({total:.2f} s in total)</div>"
+        )
         sizes = {c.cluster_id: c.edge_count for c in cmap.clusters}
-        for o in reversed(cmap.optimizations[-12:]):
-            cluster = "end" if o.cluster_id < 0 else str(o.cluster_id)
-            lines.append(
-                f"| {o.time:.1f} | {cluster} | {sizes.get(o.cluster_id, 0)} | {o.vertices} | "
-                f"{o.iterations} | {o.wall_s * 1000:.0f} | {o.integrated} | "
-                f"{o.short_edges_removed} |"
+        rows = "".join(
+            f"<tr><td>{o.time:.1f}</td><td>{'end' if o.cluster_id < 0 else o.cluster_id}</td>"
+            f"<td>{sizes.get(o.cluster_id, 0)}</td><td>{o.vertices}</td><td>{o.iterations}</td>"
+            f"<td>{o.wall_s * 1000:.0f}</td><td>{o.integrated}</td>"
+            f"<td>{o.short_edges_removed}</td></tr>"
+            for o in reversed(cmap.optimizations[-12:])
+        )
+        table = ""
+        if cmap.optimizations:
+            table = (
+                '<table class="cogmap-table" id="cogmap-optimizations"><thead><tr>'
+                "<th>t (s)</th><th>cluster</th><th>edges</th><th>V</th><th>iters</th>"
+                "<th>ms</th><th>merged</th><th>short</th></tr></thead>"
+                f"<tbody>{rows}</tbody></table>"
             )
+        latency = ""
         rebuilds = [b for b in self.replay.rebuilds if b.completed]
         if rebuilds:
             last = rebuilds[-1]
-            shown = [f"{m.value} {last.latency(m) * 1000:.0f} ms" for m in last.published]
-            lines.append("")
-            lines.append("last parameter change shown after: " + ", ".join(shown))
-        self.log_md.content = "\n".join(lines) if cmap.optimizations else lines[0]
+            shown = [
+                f"{m.value} {last.latency(m) * 1000:.0f} ms ({last.how.get(m, '')})"
+                for m in last.published
+            ]
+            latency = (
+                '<div class="cogmap-note" id="cogmap-latency">last parameter change shown '
+                f"after: {', '.join(shown)}</div>"
+            )
+        return legend + summary + table + latency
 
     # ------------------------------------------------------------------ export
+    def _view_of(self, client: viser.ClientHandle | None) -> tuple[MapMode, ...]:
+        view = self.views.get(getattr(client, "client_id", -1))
+        if view is not None:
+            return view.state.shown
+        return self._default_modes
+
     def _download(self, client: viser.ClientHandle | None, what: str) -> None:
         try:
             with self.replay.lock:
-                mode = self.shown_modes[0]
+                mode = self._view_of(client)[0]
                 if what == "g2o":
                     name, content = f"{mode.value}.g2o", g2o_bytes(self.replay.session.maps[mode])
                 elif what == "summary":
@@ -828,28 +1126,92 @@ class CogmapApp:
                     name, content = "sizes.csv", sizes_csv_bytes(self.replay)
         except Exception as exc:
             traceback.print_exc()
-            self.export_md.content = f"export failed: {html.escape(str(exc))}"
+            self.export_md.content = self._export_message(f"export failed: {exc}", error=True)
             return
-        self.export_md.content = f"sent {name} ({len(content)} bytes)"
+        self.export_md.content = self._export_message(f"sent {name} ({len(content)} bytes)")
         targets = [client] if client is not None else list(self.server.get_clients().values())
         for c in targets:
             c.send_file_download(name, content, save_immediately=True)
 
-    def _save_replay(self, client: viser.ClientHandle | None) -> None:
+    def _export_message(self, text_: str, error: bool = False) -> str:
+        cls = "cogmap-note cogmap-error" if error else "cogmap-note"
+        return f'<div class="{cls}" id="cogmap-export">{html.escape(text_)}</div>'
+
+    def _save_replay(self, client: viser.ClientHandle | None) -> threading.Thread:
         path = Path(self.replay_path.value).expanduser()
-        self.export_md.content = f"saving the HTML replay to {path} …"
+        modes = self._view_of(client)
+        self.export_md.content = self._export_message(f"saving the HTML replay to {path} …")
 
         def work() -> None:
             try:
-                saved = save_html_replay(self.replay, self.shown_modes, path)
+                saved = save_html_replay(self.replay, modes, path, static_dir=self.static_dir)
             except CogmapError as exc:
-                self.export_md.content = f"replay not saved: {exc}"
+                self.export_md.content = self._export_message(f"replay not saved: {exc}", True)
                 return
             except Exception as exc:
                 traceback.print_exc()
-                self.export_md.content = f"replay not saved: {type(exc).__name__}: {exc}"
+                self.export_md.content = self._export_message(
+                    f"replay not saved: {type(exc).__name__}: {exc}", True
+                )
                 return
             self.exports.append(saved)
-            self.export_md.content = f"saved the HTML replay to `{saved}`"
+            self.export_md.content = self._export_message(f"saved the HTML replay to {saved}")
 
-        threading.Thread(target=work, name="cogmap-html-replay", daemon=True).start()
+        thread = threading.Thread(target=work, name="cogmap-html-replay", daemon=True)
+        thread.start()
+        return thread
+
+    # ------------------------------------------------------------------ another bag
+    def _open_message(self, text_: str, error: bool = False) -> None:
+        cls = "cogmap-note cogmap-error" if error else "cogmap-note"
+        self.open_md.content = f'<div class="{cls}" id="cogmap-open">{html.escape(text_)}</div>'
+
+    def open_bag(self, typed: str) -> bool:
+        """Replay the bag at path ``typed`` (on the server) instead; errors go to the page."""
+        raw = typed.strip()
+        if not raw:
+            self._open_message("type the path of a .bag file on the server", error=True)
+            return False
+        path = Path(raw).expanduser()
+        problem = None
+        if not path.exists():
+            problem = f"{path} does not exist"
+        elif path.is_dir():
+            problem = f"{path} is a folder, not a .bag file"
+        elif path.suffix.lower() != ".bag":
+            problem = f"{path} is not a .bag file (ROS 1 bag)"
+        elif not os.access(path, os.R_OK):
+            problem = f"{path} is not readable"
+        if problem is None:
+            try:
+                with open_bag(path, topics=self._topics, image_scale=self._image_scale) as reader:
+                    frames = reader.info.frame_count
+                if frames == 0:
+                    problem = f"{path} has no camera frames on the image topic"
+            except CogmapError as exc:
+                problem = str(exc)
+            except Exception as exc:
+                problem = f"cannot open {path}: {type(exc).__name__}: {exc}"
+        if problem is not None:
+            self._open_message(f"not opened: {problem}", error=True)
+            return False
+        with self._switch_lock:
+            old = self.replay
+            params = old.params
+            speed = old.speed
+            old.stop()
+            with self.scene_lock:
+                self.streamer.reset()
+                self._figures.clear()
+                self._figures_key.clear()
+                self._false_key = None
+                self._false_times = np.zeros(0)
+                self._odometry_key = None
+                self._links_counted = (0, 0)
+                self.replay = self._make_replay(path, params, speed, True)
+                self.started_at = time.monotonic()
+            self.views_changed()
+            self.replay.start()
+        self._open_message(f"opened {path} ({frames} frames); replaying it for everyone")
+        self._sync_play_button()
+        return True

@@ -10,9 +10,11 @@ plays the map growing, with optimisations, with no server behind it.
 from __future__ import annotations
 
 import contextlib
+import html
 import io
 import json
 import math
+import re
 import socket
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,7 +24,8 @@ import numpy as np
 import viser
 
 from app.pipeline import read_warnings, session_summary, source_description, write_sizes_csv
-from app.server.scene import SceneStreamer
+from app.server.figures import false_link_times, truth_transform
+from app.server.scene import MapExtras, SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
@@ -123,6 +126,49 @@ def _dead_reckoning_extent(events: Sequence[MapEvent]) -> tuple[float, float, fl
     return float(x.min()), float(x.max()), float(y.min()), float(y.max())
 
 
+def _quiet() -> contextlib.ExitStack:
+    """Silence viser: a banner when a server starts, "(viser) Server stopped" when it stops."""
+    stack = contextlib.ExitStack()
+    stack.enter_context(contextlib.redirect_stdout(io.StringIO()))
+    stack.enter_context(contextlib.redirect_stderr(io.StringIO()))
+    return stack
+
+
+def replay_caption(
+    modes: Sequence[MapMode],
+    params: MapParams,
+    bag: str,
+    seconds: float,
+    replay_s: float,
+    static_dir: Path | None = None,
+) -> str:
+    """The caption of an exported replay (``static/replay-caption.html`` filled in)."""
+    from app.server.assets import read_asset
+
+    template = read_asset("replay-caption.html", static_dir)
+    if not template:
+        return ""
+    values = (
+        f"α {params.alpha:g} · β {params.beta:g} · δ {params.delta:g} · "
+        f"T_interval {params.t_interval:g} s · T_total {params.t_total:g} s"
+    )
+    return template.format(
+        maps=html.escape(" beside ".join(f"{m.value} map" for m in modes)),
+        bag=html.escape(bag),
+        params=html.escape(values),
+        seconds=f"{seconds:.0f}",
+        replay_s=f"{replay_s:.0f}",
+    )
+
+
+def with_caption(page: str, caption: str, title: str) -> str:
+    """``page`` (viser's HTML) titled ``title``, with ``caption`` at the start of its body."""
+    page = re.sub(r"<title>.*?</title>", f"<title>{html.escape(title)}</title>", page, count=1)
+    if caption:
+        page = re.sub(r"(<body[^>]*>)", lambda m: m.group(1) + caption, page, count=1)
+    return page
+
+
 def html_replay(
     log: EventLog,
     params: MapParams,
@@ -130,15 +176,18 @@ def html_replay(
     finish: bool,
     keyframes: int = REPLAY_KEYFRAMES,
     seconds: float = REPLAY_SECONDS,
+    bag: str = "",
+    static_dir: Path | None = None,
 ) -> str:
     """A self-contained HTML page replaying the maps ``modes`` built from ``log``.
 
     The events are applied to fresh maps with ``params``; after every key frame the scene is
     updated incrementally on a private viser server, whose serializer records it with a pause,
-    so that the whole session plays in about ``seconds``.
+    so that the whole session plays in about ``seconds``. The ground truth is aligned to each
+    map as on the page; a caption names the maps, the bag and the parameters.
     """
     modes = tuple(modes)
-    with contextlib.redirect_stdout(io.StringIO()):  # viser prints its URL banner
+    with _quiet():
         server = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
     try:
         streamer = SceneStreamer(server, modes)
@@ -154,6 +203,7 @@ def html_replay(
         step = max(1, math.ceil(n / max(1, keyframes)))
         pause = seconds / max(1, math.ceil(n / step))
         truth = log.ground_truth if log.has_ground_truth() else None
+        false_times = false_link_times(log)
         done = 0
         for k in range(step, n + step, step):
             k = min(k, n)
@@ -164,11 +214,15 @@ def html_replay(
             if k == n and finish:
                 for cmap in maps.values():
                     cmap.finish(log.frame_time[-1])
-            streamer.publish(maps, truth, k)
+            extras = {m: MapExtras(truth_transform(log, c), false_times) for m, c in maps.items()}
+            streamer.publish(maps, truth, k, extras, duration=log.frame_time[-1])
             serializer.insert_sleep(pause)
-        return serializer.as_html()
+        duration = log.frame_time[-1] - log.frame_time[0] if n else 0.0
+        caption = replay_caption(modes, params, bag, duration, seconds, static_dir)
+        return with_caption(serializer.as_html(), caption, f"cogmap replay · {bag}")
     finally:
-        server.stop()
+        with _quiet():
+            server.stop()
 
 
 def save_html_replay(
@@ -177,6 +231,7 @@ def save_html_replay(
     path: Path,
     keyframes: int = REPLAY_KEYFRAMES,
     seconds: float = REPLAY_SECONDS,
+    static_dir: Path | None = None,
 ) -> Path:
     """Write the HTML replay of ``replay`` up to its current frame to ``path`` (atomically).
 
@@ -206,7 +261,8 @@ def save_html_replay(
     except OSError as exc:
         raise output_error(path.parent, exc, "create") from None
     check_writable(path.parent)
-    page = html_replay(log, params, modes, finish, keyframes, seconds)
+    bag = replay.bag_path.name if replay.bag_path is not None else ""
+    page = html_replay(log, params, modes, finish, keyframes, seconds, bag, static_dir)
     try:
         write_text_atomic(path, page)
     except OSError as exc:

@@ -35,6 +35,15 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Protocol
 
+from app.server.rebuild import (
+    Abandoned,
+    Builder,
+    BuildTask,
+    MapCache,
+    ScheduleIndex,
+    ThreadBuilder,
+    same_schedule,
+)
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagReader, BagTopics
@@ -51,8 +60,6 @@ BagSource = Path | Callable[[GenerationProgress], Path]
 #: A front-end configuration, or a function choosing it for the bag once it is known.
 FrontEndSource = FrontEndConfig | Callable[[Path], FrontEndConfig] | None
 
-#: Events applied between two checks for a newer request during a rebuild.
-REBUILD_CHUNK = 1000
 #: A replay that falls further behind its schedule than this (s) re-anchors instead of racing.
 MAX_LAG_S = 1.0
 _TIME_TOLERANCE = 1e-6
@@ -85,6 +92,18 @@ PARAMS_USED: dict[MapMode, frozenset[str]] = {
 def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:
     """Whether map ``mode`` built with ``old`` can differ from one built with ``new``."""
     return any(getattr(old, name) != getattr(new, name) for name in PARAMS_USED[mode])
+
+
+def _label_params(maps: dict[MapMode, CognitiveMap], params: MapParams) -> None:
+    """Give maps taken from the cache the parameters they are adopted with.
+
+    A cached map was built with parameters that agree with ``params`` in every one it uses
+    (:data:`PARAMS_USED`) but may differ in the others; it must carry ``params`` so that later
+    changes compare against what is in force.
+    """
+    for cmap in maps.values():
+        if cmap.params != params:
+            cmap.set_params(params)
 
 
 class PlaybackState(StrEnum):
@@ -120,6 +139,8 @@ class RebuildRecord:
         requested: ``time.perf_counter()`` when the parameters were requested.
         compute_s: rebuild time of each map (s).
         published: ``time.perf_counter()`` when each map was handed to the listener.
+        how: per map, ``"built"``, ``"cached"`` (built before for these parameters), ``"kept"``
+            (the change does not affect it, or gives it the same cluster schedule).
         completed: all maps rebuilt (False: abandoned for newer parameters).
 
     """
@@ -129,6 +150,7 @@ class RebuildRecord:
     requested: float
     compute_s: dict[MapMode, float] = field(default_factory=dict)
     published: dict[MapMode, float] = field(default_factory=dict)
+    how: dict[MapMode, str] = field(default_factory=dict)
     completed: bool = False
 
     def latency(self, mode: MapMode) -> float | None:
@@ -137,8 +159,8 @@ class RebuildRecord:
         return None if at is None else at - self.requested
 
 
-class _Interrupted(Exception):
-    """A newer request arrived during a rebuild."""
+#: A newer request arrived during a rebuild.
+_Interrupted = Abandoned
 
 
 class Replay:
@@ -156,6 +178,8 @@ class Replay:
         speed: playback speed (data seconds per wall second; ``math.inf``: as fast as possible).
         autoplay: start playing as soon as the bag is open.
         priority: maps rebuilt first after a parameter change (the displayed ones).
+        builder: where maps are rebuilt (:mod:`app.server.rebuild`; default: this thread). The
+            replay owns it and closes it when stopped.
         fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
         log: how to read a log (ignored for bags).
         resume: a saved session and its metadata (:func:`~cogmap_core.session_file.load_session`)
@@ -181,6 +205,7 @@ class Replay:
         autoplay: bool = True,
         priority: tuple[MapMode, ...] = (MapMode.COMPACT,),
         topics: BagTopics | None = None,
+        builder: Builder | None = None,
         fmt: str | None = None,
         log: LogOptions | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
@@ -241,6 +266,10 @@ class Replay:
         self._anchor: tuple[float, float] | None = None  # (wall, data time)
         self._fast_forward_to: float | None = None
         self._busy = 0  # 1 while the worker handles a request or a frame
+        self.builder: Builder = builder or ThreadBuilder()
+        self.cache = MapCache(uses=PARAMS_USED)
+        self._schedule = ScheduleIndex()
+        self._log_id = 0  # bumped with every new session (the cache's maps belong to one)
 
     # ================================================================== requests (any thread)
     def start(self) -> None:
@@ -256,6 +285,7 @@ class Replay:
             self._cond.notify_all()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout)
+        self.builder.close()
 
     @property
     def alive(self) -> bool:
@@ -384,8 +414,15 @@ class Replay:
                         self._fast_forward_to = None
                     self._update_state_locked()
                     self._cond.wait(0.25)
-                    continue
-                self._busy = 1
+                    idle = True
+                else:
+                    idle = False
+                    self._busy = 1
+                    self._update_state_locked()  # e.g. paused -> playing
+            if idle:
+                if self.state is not PlaybackState.LOADING:
+                    self.builder.prepare(self.session.log)  # the next rebuild starts at once
+                continue
             try:
                 if restart:
                     self._do_restart()
@@ -502,6 +539,9 @@ class Replay:
         with self.lock:
             self.frontend_config = config
             self.session = SlamSession(self._target_params, config, evaluation=kind.evaluation)
+            self._log_id += 1
+            self.cache.clear()
+            self.builder.reset()
 
     def _resolve_bag(self) -> Path:
         source = self.bag_source
@@ -625,6 +665,7 @@ class Replay:
         with self._cond:
             self._fast_forward_to = None
             self._step_request = 0
+            self._playing = False  # ended: a seek stays there; play starts over (the page)
         self._update_state_locked()
         self._notify_maps(ALL_MODES, True)
         self._notify_status()
@@ -681,14 +722,28 @@ class Replay:
         log = self.session.log
         base = self.base_frames
         k = max(base, min(k, log.frames))
+        maps: dict[MapMode, CognitiveMap] = {}
+        tasks = []
         if k == base and self._base_maps and params == self._base_params:
             # back to the resumed state: the session's own maps (nothing to rebuild)
             maps = {mode: copy.deepcopy(cmap) for mode, cmap in self._base_maps.items()}
         else:
-            maps = {
-                mode: self._build_map(mode, params, k, False, generation) for mode in self._order()
-            }
+            for mode in self._order():
+                cached = self.cache.take(self.cache.key(mode, params, k, False, self._log_id))
+                if cached is not None:
+                    maps[mode] = cached
+                else:
+                    tasks.append(BuildTask(mode, params, k, False))
+        try:
+            for built in self.builder.build(log, tasks, lambda: self._generation != generation):
+                maps[built.task.mode] = built.cmap
+        except Abandoned:
+            for mode, cmap in maps.items():  # what was done is kept for the next time
+                self.cache.put(self.cache.key(mode, params, k, False, self._log_id), cmap)
+            raise
         with self.lock:
+            self._keep_replaced(maps)
+            _label_params(maps, params)
             self.session.adopt(params, maps)
             self.session.finished = False
             if k == base:
@@ -719,22 +774,13 @@ class Replay:
         first = tuple(m for m in self._priority if m in self.session.modes)
         return first + tuple(m for m in self.session.modes if m not in first)
 
-    def _build_map(
-        self, mode: MapMode, params: MapParams, frames: int, finish: bool, generation: int
-    ) -> CognitiveMap:
-        """What ``SlamSession.rebuild`` does for one map, abandoned when a newer request comes."""
-        log = self.session.log
-        end = log.frame_end[frames - 1] if frames else 0
-        cmap = CognitiveMap(mode, params)
-        for lo in range(0, end, REBUILD_CHUNK):
-            if self._generation != generation:
-                raise _Interrupted
-            cmap.apply_all(log.events[lo : min(lo + REBUILD_CHUNK, end)])
-        if finish and frames:
-            cmap.finish(log.frame_time[frames - 1])
-        if self._generation != generation:
-            raise _Interrupted
-        return cmap
+    def _keep_replaced(self, maps: dict[MapMode, CognitiveMap]) -> None:
+        """Put the current maps that ``maps`` replace into the cache (call with the lock)."""
+        for mode, cmap in maps.items():
+            old = self.session.maps.maps.get(mode)
+            if old is not None and old is not cmap:
+                key = self.cache.key(mode, old.params, self.cursor, self.at_end, self._log_id)
+                self.cache.put(key, old)
 
     def _do_rebuild(self) -> None:
         with self._cond:
@@ -752,21 +798,45 @@ class Replay:
             with self.lock:
                 self.session.params = params
             return
+        log = self.session.log
+        tasks = []
         for mode in self._order():
             started = time.perf_counter()
             current = self.session.maps[mode]
-            if needs_rebuild(mode, current.params, params):
-                cmap = self._build_map(mode, params, frames, finish, generation)
-            else:
-                cmap = current  # the changed parameters do not affect this map
+            if not needs_rebuild(mode, current.params, params) or same_schedule(
+                self._schedule, log, frames, finish, current.params, params
+            ):
+                cmap: CognitiveMap | None = current  # the change leaves this map as it is
                 with self.lock:
-                    cmap.set_params(params)
-            record.compute_s[mode] = time.perf_counter() - started
-            with self.lock:
-                self.session.adopt(params, {mode: cmap})
-            self._notify_maps((mode,), True)
-            record.published[mode] = time.perf_counter()
+                    current.set_params(params)
+                record.how[mode] = "kept"
+            else:
+                cmap = self.cache.take(self.cache.key(mode, params, frames, finish, self._log_id))
+                record.how[mode] = "cached"
+            if cmap is None:
+                tasks.append(BuildTask(mode, params, frames, finish))
+                continue
+            self._publish_rebuilt(record, mode, params, cmap, time.perf_counter() - started)
+        for built in self.builder.build(log, tasks, lambda: self._generation != generation):
+            record.how[built.task.mode] = "built"
+            self._publish_rebuilt(record, built.task.mode, params, built.cmap, built.compute_s)
         record.completed = True
         with self._cond:
             self._anchor = None
         self._notify_status()
+
+    def _publish_rebuilt(
+        self,
+        record: RebuildRecord,
+        mode: MapMode,
+        params: MapParams,
+        cmap: CognitiveMap,
+        compute_s: float,
+    ) -> None:
+        record.compute_s[mode] = compute_s
+        with self.lock:
+            self._keep_replaced({mode: cmap})
+            _label_params({mode: cmap}, params)
+            self.session.adopt(params, {mode: cmap})
+        self._notify_maps((mode,), True)
+        record.published[mode] = time.perf_counter()

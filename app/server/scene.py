@@ -1,41 +1,50 @@
 """Incremental streaming of the cognitive maps into the viser scene.
 
-Every map lives under its own frame ``/map/<mode>`` (moved aside for the side-by-side comparison),
-with children
+Every map lives under its own frame ``/map/<mode>``, with one frame per *layer* under it so that
+each viewer can show or hide it (:mod:`app.server.view` shadows these frames per client):
 
-- ``/map/<mode>/vertices/cNNNN`` -- point clouds of at most :data:`CHUNK` vertices each,
-- ``/map/<mode>/edges/sequential/cNNNN`` and ``/map/<mode>/edges/loop/cNNNN`` -- line segments,
-  loop closures coloured by cluster id (:func:`cluster_color`),
-- ``/map/<mode>/robot`` -- the current (dead-reckoned) robot pose,
+- ``vertices/cNNNN`` -- point clouds of at most :data:`CHUNK` vertices, in the map's colour;
+- ``sequential/<colouring>/cNNNN`` and ``loop/<colouring>/cNNNN`` -- line segments of the
+  sequential and loop-closure edges, once per edge colouring in use (:data:`COLOURINGS`: loop
+  closures by cluster id over neutral sequential edges, every edge by creation time, or by its
+  error -- the whitened residual the optimiser sees);
+- ``false_loops`` -- the loop-closure edges made from links the ground truth calls false
+  (:meth:`~cogmap_core.slam.EventLog.loop_closure_score`), drawn over the others;
+- ``truth/aligned/cNNNN`` -- the ground-truth path, placed by the frame ``truth/aligned`` with the
+  rigid transform that aligns the truth to the map (the one the ATE uses): a good map lies on it;
+- ``odometry/cNNNN`` -- the dead-reckoned path (odometry alone), in the map's own frame;
+- ``robot`` -- a triangle at the robot's current (dead-reckoned) pose.
 
-and the ground-truth path under ``/ground_truth/path/cNNNN``, expressed in the frame of the first
-ground-truth pose (which is where the maps' first vertex sits).
+- ``grid`` -- a metric grid (0.1 m cells, 1 m sections) with a 1 m scale bar under the map.
 
 Between two optimisations a map only grows at its end, so only the last chunk of each layer
 changes: :class:`ChunkedNodes` compares every chunk with what it last sent and re-sends only the
-chunks that differ. After an optimisation every vertex moves, so everything is sent once. A map
-whose sizes did not change since the last update costs one robot-pose message. Each update is
-grouped with ``server.atomic()`` so a browser never draws a half-updated map, and viser's message
-buffer keeps the latest state of every node, which is what a client joining late receives.
+chunks that differ. After an optimisation every vertex moves, so everything is sent once. Maps
+and colourings no viewer shows are not streamed. Each update is grouped with
+``server.atomic()`` so a browser never draws a half-updated map, and viser's message buffer keeps
+the latest state of every node, which is what a client joining late receives.
 """
 
 from __future__ import annotations
 
+import colorsys
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import viser
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
+from cogmap_core.optimizer import EdgeModel, edge_terms
 
 FloatArray = NDArray[np.float64]
 UInt8Array = NDArray[np.uint8]
 
-#: Items (vertices, edges, ground-truth segments) per scene node.
+#: Items (vertices, edges, path segments) per scene node.
 CHUNK = 512
 
 MAP_COLORS: dict[MapMode, tuple[int, int, int]] = {
@@ -43,41 +52,150 @@ MAP_COLORS: dict[MapMode, tuple[int, int, int]] = {
     MapMode.SCENE_INTEGRATION: (206, 92, 0),
     MapMode.COMPACT: (30, 140, 60),
 }
-GROUND_TRUTH_COLOR = (150, 150, 150)
-#: Colours of loop-closure clusters (cluster id modulo the length).
-CLUSTER_PALETTE: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180),
-    (255, 127, 14),
-    (44, 160, 44),
-    (214, 39, 40),
-    (148, 103, 189),
-    (140, 86, 75),
-    (227, 119, 194),
-    (188, 189, 34),
-    (23, 190, 207),
-    (60, 60, 60),
-)
-_PALETTE = np.array(CLUSTER_PALETTE, dtype=np.uint8)
+SEQUENTIAL_COLOR = (125, 125, 125)
+GROUND_TRUTH_COLOR = (160, 160, 160)
+ODOMETRY_COLOR = (176, 122, 64)
+FALSE_LOOP_COLOR = (220, 20, 20)
+ROBOT_COLOR = (15, 15, 15)
+PINNED_COLOR = (128, 96, 170)
+SELECTION_COLOR = (255, 196, 0)
 
-VERTEX_Z = 0.004
-EDGE_Z = 0.0
-GROUND_TRUTH_Z = -0.004
+#: Ways to colour the edges: loop closures by cluster, every edge by time, or by its error.
+COLOURINGS: tuple[str, ...] = ("cluster", "time", "error")
+#: An edge whose whitened residual reaches this is drawn in the last colour of the error scale.
+ERROR_SCALE_MAX = 3.0
+
+#: Heights: the ground truth and odometry below, vertices, then edges on top (seen from above).
+GROUND_TRUTH_Z = -0.006
+ODOMETRY_Z = -0.004
+GRID_Z = -0.008
+VERTEX_Z = 0.0
+SEQUENTIAL_Z = 0.003
+LOOP_Z = 0.005
+FALSE_LOOP_Z = 0.007
+ROBOT_Z = 0.009
+
+#: Point size of vertices (m): a third of the typical edge length, within these bounds.
+VERTEX_SIZE_RANGE = (0.008, 0.03)
+
+_GOLDEN_ANGLE = 137.50776405003785
+#: Size of the precomputed cluster palette (later ids cycle through it).
+PALETTE_SIZE = 48
+
+
+def _lab(rgb: NDArray[np.float64]) -> NDArray[np.float64]:
+    """CIE L*a*b* of sRGB colours ``(n, 3)`` in 0..255 (D65): distances there match the eye."""
+    c = rgb / 255.0
+    c = np.where(c > 0.04045, ((c + 0.055) / 1.055) ** 2.4, c / 12.92)
+    xyz = c @ np.array(
+        [[0.4124, 0.2126, 0.0193], [0.3576, 0.7152, 0.1192], [0.1805, 0.0722, 0.9505]]
+    )
+    xyz /= np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16.0 / 116.0)
+    return np.stack(
+        [116.0 * f[:, 1] - 16.0, 500.0 * (f[:, 0] - f[:, 1]), 200.0 * (f[:, 1] - f[:, 2])], 1
+    )
+
+
+def _build_palette(size: int) -> tuple[tuple[int, int, int], ...]:
+    """Saturated colours, each as far as possible (in L*a*b*) from the ones before it.
+
+    Candidates span the hue circle at several brightnesses and saturations; the colours the
+    page uses for other things (maps, sequential edges, ground truth, robot, false loop
+    closures, the selection) count as already taken, so no cluster looks like them.
+    """
+    candidates = []
+    for hue in np.arange(0.0, 360.0, 6.0):
+        for value in (0.98, 0.78, 0.58):
+            for saturation in (1.0, 0.7):
+                r, g, b = colorsys.hsv_to_rgb(hue / 360.0, saturation, value)
+                candidates.append((round(r * 255), round(g * 255), round(b * 255)))
+    cand = np.array(candidates, dtype=np.float64)
+    lab = _lab(cand)
+    taken = [
+        *MAP_COLORS.values(),
+        SEQUENTIAL_COLOR,
+        GROUND_TRUTH_COLOR,
+        ROBOT_COLOR,
+        FALSE_LOOP_COLOR,
+        SELECTION_COLOR,
+        (255, 255, 255),
+    ]
+    nearest = np.min(
+        np.linalg.norm(lab[:, None, :] - _lab(np.array(taken, float))[None], axis=2), axis=1
+    )
+    palette: list[tuple[int, int, int]] = []
+    for _ in range(size):
+        k = int(np.argmax(nearest))  # the candidate farthest from everything taken
+        palette.append((int(cand[k, 0]), int(cand[k, 1]), int(cand[k, 2])))
+        nearest = np.minimum(nearest, np.linalg.norm(lab - lab[k], axis=1))
+    return tuple(palette)
+
+
+CLUSTER_PALETTE = _build_palette(PALETTE_SIZE)
 
 
 def cluster_color(cluster_id: int) -> tuple[int, int, int]:
-    """The colour of loop-closure cluster ``cluster_id``."""
-    return CLUSTER_PALETTE[cluster_id % len(CLUSTER_PALETTE)]
+    """The colour of loop-closure cluster ``cluster_id`` (:data:`CLUSTER_PALETTE`).
+
+    Consecutive clusters get very different colours, none of them grey, black or like the
+    colours of the maps, the ground truth, the robot or the false loop closures; the first
+    :data:`PALETTE_SIZE` clusters all differ (beyond, the palette repeats).
+    """
+    return CLUSTER_PALETTE[int(cluster_id) % PALETTE_SIZE]
 
 
-def lighter(color: tuple[int, int, int], amount: float = 0.45) -> tuple[int, int, int]:
-    """``color`` blended towards white by ``amount`` (0..1)."""
-    r, g, b = (int(round(c + (255 - c) * amount)) for c in color)
-    return r, g, b
+def cluster_colors(cluster_ids: NDArray[np.int64]) -> UInt8Array:
+    """``(n, 3)`` colours of cluster ids."""
+    if cluster_ids.size == 0:
+        return np.zeros((0, 3), dtype=np.uint8)
+    unique, inverse = np.unique(cluster_ids, return_inverse=True)
+    table = np.array([cluster_color(int(c)) for c in unique], dtype=np.uint8)
+    return table[inverse.reshape(-1)]
+
+
+#: Anchor colours of the time scale (dark blue, teal, green, yellow: a viridis-like ramp).
+_TIME_RAMP = np.array([(68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37)])
+#: Anchor colours of the error scale (blue, green, yellow, red at ERROR_SCALE_MAX).
+_ERROR_RAMP = np.array([(40, 110, 210), (40, 170, 90), (240, 200, 30), (215, 30, 30)])
+
+
+def ramp(values: FloatArray, anchors: NDArray[np.int64]) -> UInt8Array:
+    """Colours of ``values`` in ``[0, 1]`` (clipped) on a ramp through ``anchors``."""
+    v = np.clip(np.nan_to_num(values, nan=0.0), 0.0, 1.0) * (len(anchors) - 1)
+    lo = np.minimum(v.astype(np.int64), len(anchors) - 2)
+    w = (v - lo)[:, None]
+    return np.round(anchors[lo] * (1.0 - w) + anchors[lo + 1] * w).astype(np.uint8)
+
+
+def ramp_css(anchors: NDArray[np.int64]) -> str:
+    """The ramp as a CSS linear gradient (for legends)."""
+    stops = ", ".join(f"rgb({r},{g},{b})" for r, g, b in anchors.tolist())
+    return f"linear-gradient(to right, {stops})"
+
+
+TIME_RAMP_CSS = ramp_css(_TIME_RAMP)
+ERROR_RAMP_CSS = ramp_css(_ERROR_RAMP)
 
 
 def yaw_to_wxyz(theta: float) -> tuple[float, float, float, float]:
     """Quaternion (w, x, y, z) of a rotation by ``theta`` about +z."""
     return math.cos(theta / 2.0), 0.0, 0.0, math.sin(theta / 2.0)
+
+
+def edge_errors(cmap: CognitiveMap) -> FloatArray:
+    """Per live edge (snapshot order), the norm of its whitened residual at the current poses.
+
+    This is what the optimiser weighs (before the Huber loss): about 1 for an edge off by one
+    standard deviation of its noise model.
+    """
+    graph = cmap.to_pose_graph()
+    if graph.num_edges == 0:
+        return np.zeros(0)
+    model = EdgeModel(graph.measurements, graph.information)
+    x = graph.poses
+    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, None, False)
+    return np.sqrt(np.einsum("ka,ka->k", res, res))
 
 
 @dataclass
@@ -98,21 +216,31 @@ class StreamStats:
 
 
 NodeFactory = Callable[[str, np.ndarray, np.ndarray | None], viser.SceneNodeHandle]
+#: Puts new content into an existing node (returns False when it cannot).
+NodeUpdater = Callable[[viser.SceneNodeHandle, np.ndarray, np.ndarray | None], bool]
 
 
 class ChunkedNodes:
     """A growing array of items shown as scene nodes of :data:`CHUNK` items each.
 
     :meth:`sync` sends only the chunks whose content differs from what was last sent, and removes
-    chunks beyond the new length.
+    chunks beyond the new length. A changed chunk is updated in place when ``updater`` is given
+    (its points and colours replaced): a browser then keeps the node and its material, which is
+    much cheaper than making a new one (a new line material is compiled, slowly without a GPU).
     """
 
     def __init__(
-        self, name: str, factory: NodeFactory, stats: StreamStats, chunk: int = CHUNK
+        self,
+        name: str,
+        factory: NodeFactory,
+        stats: StreamStats,
+        chunk: int = CHUNK,
+        updater: NodeUpdater | None = None,
     ) -> None:
         """Manage nodes ``<name>/c0000``, ``<name>/c0001``, ... made by ``factory``."""
         self.name = name
         self.factory = factory
+        self.updater = updater
         self.stats = stats
         self.chunk = chunk
         self._handles: list[viser.SceneNodeHandle] = []
@@ -132,8 +260,17 @@ class ChunkedNodes:
         """All items currently shown, concatenated (None when empty)."""
         return np.concatenate([part for part, _ in self._sent]) if self._sent else None
 
-    def sync(self, items: np.ndarray, colors: np.ndarray | None = None) -> int:
-        """Show ``items`` (with per-item ``colors`` or none); return the chunks sent."""
+    def colors(self) -> np.ndarray | None:
+        """Their colours (None when empty or uncoloured)."""
+        if not self._sent or self._sent[0][1] is None:
+            return None
+        return np.concatenate([c for _, c in self._sent if c is not None])
+
+    def sync(self, items: np.ndarray, colors: np.ndarray | None = None, force: bool = False) -> int:
+        """Show ``items`` (with per-item ``colors`` or none); return the chunks sent.
+
+        ``force`` re-sends every chunk (the nodes' look changed).
+        """
         n = items.shape[0]
         count = -(-n // self.chunk)
         sent = 0
@@ -141,7 +278,7 @@ class ChunkedNodes:
             lo, hi = c * self.chunk, min((c + 1) * self.chunk, n)
             part = items[lo:hi]
             cpart = None if colors is None else colors[lo:hi]
-            if c < len(self._sent):
+            if c < len(self._sent) and not force:
                 old, old_colors = self._sent[c]
                 if (
                     old.shape == part.shape
@@ -149,13 +286,15 @@ class ChunkedNodes:
                     and (cpart is None or np.array_equal(old_colors, cpart))
                 ):
                     continue
-            handle = self.factory(f"{self.name}/c{c:04d}", part, cpart)
             record = (part.copy(), None if cpart is None else cpart.copy())
             if c < len(self._handles):
+                handle = self._handles[c]
+                if self.updater is None or not self.updater(handle, part, cpart):
+                    handle = self.factory(f"{self.name}/c{c:04d}", part, cpart)
                 self._handles[c] = handle
                 self._sent[c] = record
             else:
-                self._handles.append(handle)
+                self._handles.append(self.factory(f"{self.name}/c{c:04d}", part, cpart))
                 self._sent.append(record)
             sent += 1
             self.stats.items_sent += part.shape[0]
@@ -177,7 +316,7 @@ class ChunkedNodes:
         self._sent.clear()
 
 
-def _segments_from_poses(poses: FloatArray, z: float) -> NDArray[np.float32]:
+def path_segments(poses: FloatArray, z: float) -> NDArray[np.float32]:
     """Consecutive points of a path as line segments ``(n - 1, 2, 3)``."""
     if poses.shape[0] < 2:
         return np.zeros((0, 2, 3), dtype=np.float32)
@@ -188,63 +327,179 @@ def _segments_from_poses(poses: FloatArray, z: float) -> NDArray[np.float32]:
     return seg
 
 
+def robot_triangle(size: float) -> tuple[NDArray[np.float32], NDArray[np.int32]]:
+    """A flat arrow-head pointing along +x (vertices, faces), both sides drawn."""
+    v = np.array(
+        [[size, 0.0, 0.0], [-0.6 * size, 0.55 * size, 0.0], [-0.3 * size, 0.0, 0.0],
+         [-0.6 * size, -0.55 * size, 0.0]],
+        dtype=np.float32,
+    )  # fmt: skip
+    f = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
+    return v, f
+
+
+@dataclass
+class MapExtras:
+    """What the scene shows with a map besides its graph.
+
+    Attributes:
+        truth_transform: (theta, tx, ty) taking the ground truth onto the map (None: no truth).
+        false_edge_times: creation times of the links the ground truth calls false.
+
+    """
+
+    truth_transform: tuple[float, float, float] | None = None
+    false_edge_times: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+
+#: The layers of a map a viewer can switch on and off (frame names under ``/map/<mode>``).
+LAYERS: tuple[str, ...] = (
+    "vertices",
+    "sequential",
+    "loop",
+    "false_loops",
+    "truth",
+    "odometry",
+    "grid",
+)
+
+
 class MapLayer:
     """The scene nodes of one cognitive map under ``/map/<mode>``."""
 
     def __init__(
         self, server: viser.ViserServer, mode: MapMode, stats: StreamStats, root: str = "/map"
     ) -> None:
-        """Create the (empty) frame of the map; nothing else is sent until :meth:`update`."""
+        """Create the (empty) frames of the map; nothing else is sent until :meth:`update`."""
         self.server = server
         self.mode = mode
         self.stats = stats
         self.name = f"{root}/{mode.value}"
-        color = MAP_COLORS[mode]
-        self.frame = server.scene.add_frame(self.name, show_axes=False)
-        self._offset = 0.0
+        self.color = MAP_COLORS[mode]
         scene = server.scene
+        self.frame = scene.add_frame(self.name, show_axes=False)
+        self.groups: dict[str, viser.FrameHandle] = {
+            layer: scene.add_frame(f"{self.name}/{layer}", show_axes=False) for layer in LAYERS
+        }
+        self.coloured: dict[str, viser.FrameHandle] = {}
+        for kind in ("sequential", "loop"):
+            for colouring in COLOURINGS:
+                self.coloured[f"{kind}/{colouring}"] = scene.add_frame(
+                    f"{self.name}/{kind}/{colouring}",
+                    show_axes=False,
+                    visible=colouring == COLOURINGS[0],
+                )
+        self.groups["odometry"].visible = False
+        self.truth_frame = scene.add_frame(f"{self.name}/truth/aligned", show_axes=False)
+        self.grid = Grid(server, f"{self.name}/grid")
+        self._offset = 0.0
+        self.point_size = VERTEX_SIZE_RANGE[1]
 
         def vertices(name: str, part: np.ndarray, _: np.ndarray | None) -> viser.SceneNodeHandle:
             return scene.add_point_cloud(
                 name,
                 points=part,
-                colors=color,
-                point_size=0.03,
+                colors=self.color,
+                point_size=self.point_size,
                 point_shape="circle",
                 precision="float32",
                 point_shading="flat",
             )
 
-        def sequential(name: str, part: np.ndarray, _: np.ndarray | None) -> viser.SceneNodeHandle:
-            return scene.add_line_segments(
-                name, part, colors=lighter(color), thickness=1.5, thickness_units="screen"
-            )
+        def segments(thickness: float) -> NodeFactory:
+            def make(name: str, part: np.ndarray, cols: np.ndarray | None) -> viser.SceneNodeHandle:
+                assert cols is not None
+                return scene.add_line_segments(
+                    name, part, colors=cols, thickness=thickness, thickness_units="screen"
+                )
 
-        def loops(name: str, part: np.ndarray, cols: np.ndarray | None) -> viser.SceneNodeHandle:
-            assert cols is not None
-            return scene.add_line_segments(
-                name, part, colors=cols, thickness=2.5, thickness_units="screen"
-            )
+            return make
 
-        self.vertices = ChunkedNodes(f"{self.name}/vertices", vertices, stats)
-        self.sequential = ChunkedNodes(f"{self.name}/edges/sequential", sequential, stats)
-        self.loops = ChunkedNodes(f"{self.name}/edges/loop", loops, stats)
-        self.robot = scene.add_frame(
+        def plain(color: tuple[int, int, int], thickness: float) -> NodeFactory:
+            def make(name: str, part: np.ndarray, _: np.ndarray | None) -> viser.SceneNodeHandle:
+                return scene.add_line_segments(
+                    name, part, colors=color, thickness=thickness, thickness_units="screen"
+                )
+
+            return make
+
+        def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> bool:
+            with server.atomic():
+                handle.points = part
+                handle.colors = np.broadcast_to(
+                    np.array(self.color, np.uint8), (part.shape[0], 3)
+                ).copy()
+                if handle.point_size != self.point_size:
+                    handle.point_size = self.point_size
+            return True
+
+        def move_segments(color: tuple[int, int, int] | None) -> NodeUpdater:
+            def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> bool:
+                if cols is None:
+                    cols = np.broadcast_to(np.array(color, np.uint8), part.shape).copy()
+                with server.atomic():
+                    handle.points = part
+                    handle.colors = cols
+                return True
+
+            return update
+
+        self.vertices = ChunkedNodes(f"{self.name}/vertices", vertices, stats, updater=move_points)
+        self.edges: dict[str, ChunkedNodes] = {}
+        for colouring in COLOURINGS:
+            self.edges[f"sequential/{colouring}"] = ChunkedNodes(
+                f"{self.name}/sequential/{colouring}",
+                segments(1.5),
+                stats,
+                updater=move_segments(None),
+            )
+            self.edges[f"loop/{colouring}"] = ChunkedNodes(
+                f"{self.name}/loop/{colouring}", segments(3.0), stats, updater=move_segments(None)
+            )
+        self.false_loops = ChunkedNodes(
+            f"{self.name}/false_loops",
+            plain(FALSE_LOOP_COLOR, 6.0),
+            stats,
+            updater=move_segments(FALSE_LOOP_COLOR),
+        )
+        self.truth = ChunkedNodes(
+            f"{self.name}/truth/aligned",
+            plain(GROUND_TRUTH_COLOR, 1.5),
+            stats,
+            updater=move_segments(GROUND_TRUTH_COLOR),
+        )
+        self.odometry = ChunkedNodes(
+            f"{self.name}/odometry",
+            plain(ODOMETRY_COLOR, 1.5),
+            stats,
+            updater=move_segments(ODOMETRY_COLOR),
+        )
+        tri_v, tri_f = robot_triangle(0.07)
+        self.robot = scene.add_mesh_simple(
             f"{self.name}/robot",
-            axes_length=0.15,
-            axes_radius=0.012,
-            origin_radius=0.03,
-            origin_color=color,
+            tri_v,
+            tri_f,
+            color=ROBOT_COLOR,
+            side="double",
+            flat_shading=True,
+            cast_shadow=False,
+            receive_shadow=False,
         )
         self._map: CognitiveMap | None = None
         self._key: tuple[int, int, int] | None = None
+        self._coloured_key: dict[str, tuple[int, tuple[int, int, int]]] = {}
         self._robot_pose: tuple[float, float, float] | None = None
+        self._truth_sent: tuple[float, float, float] | None = None
+        self._false_key: tuple[int, int] | None = None
+        self.false_count = 0
         self.extent: tuple[float, float, float, float] | None = None  # xmin, xmax, ymin, ymax
+        self._segments = np.zeros((0, 2, 3), dtype=np.float32)
+        self._snapshot_kind = np.zeros(0, dtype=np.int8)
 
     # ------------------------------------------------------------------ layout
     @property
     def visible(self) -> bool:
-        """Whether the map is shown."""
+        """Whether the map is shown (to viewers without a view of their own)."""
         return bool(self.frame.visible)
 
     @visible.setter
@@ -254,7 +509,7 @@ class MapLayer:
 
     @property
     def offset(self) -> float:
-        """Shift of the map along +x (m), for side-by-side comparison."""
+        """Shift of the map along +x (m), for side-by-side comparison (default view)."""
         return self._offset
 
     @offset.setter
@@ -263,9 +518,30 @@ class MapLayer:
             self._offset = value
             self.frame.position = (value, 0.0, 0.0)
 
+    # compatibility: the layers of the default (cluster) colouring
+    @property
+    def sequential(self) -> ChunkedNodes:
+        """Sequential edges (cluster colouring)."""
+        return self.edges["sequential/cluster"]
+
+    @property
+    def loops(self) -> ChunkedNodes:
+        """Loop-closure edges (cluster colouring)."""
+        return self.edges["loop/cluster"]
+
     # ------------------------------------------------------------------ content
-    def update(self, cmap: CognitiveMap) -> bool:
-        """Send what changed in ``cmap`` since the last update; True when the graph changed."""
+    def update(
+        self,
+        cmap: CognitiveMap,
+        colourings: Iterable[str] = ("cluster",),
+        extras: MapExtras | None = None,
+        duration: float = 0.0,
+    ) -> bool:
+        """Send what changed in ``cmap`` since the last update; True when the graph changed.
+
+        ``colourings``: the edge colourings viewers use (the others are not sent);
+        ``duration``: the data's length (s), the end of the time colour scale.
+        """
         # Between optimisations a map only gains vertices and edges; merges and moves happen in
         # optimisations. So these three numbers change whenever the graph does.
         key = (cmap.num_vertices, cmap.num_edges, len(cmap.optimizations))
@@ -273,10 +549,21 @@ class MapLayer:
         if changed:
             self._send_graph(cmap)
             self._map, self._key = cmap, key
+            self._coloured_key.clear()
+        for colouring in colourings:
+            scale = int(duration) if colouring == "time" else 0
+            ckey = (scale, key)
+            if self._coloured_key.get(colouring) != ckey:
+                self._send_edges(cmap, colouring, duration)
+                self._coloured_key[colouring] = ckey
+        if extras is not None:
+            self._send_extras(cmap, extras, changed)
+        if changed:
+            self.grid.cover(self.extent)
         pose = cmap.current_pose()
         robot = (float(pose[0]), float(pose[1]), float(pose[2]))
         if robot != self._robot_pose:
-            self.robot.position = (robot[0], robot[1], VERTEX_Z)
+            self.robot.position = (robot[0], robot[1], ROBOT_Z)
             self.robot.wxyz = yaw_to_wxyz(robot[2])
             self._robot_pose = robot
             self.stats.robot_updates += 1
@@ -288,151 +575,265 @@ class MapLayer:
         points = np.empty((n, 3), dtype=np.float32)
         points[:, :2] = snap.poses[:, :2]
         points[:, 2] = VERTEX_Z
-        self.vertices.sync(points)
-        if n:
-            self.extent = (
-                float(points[:, 0].min()),
-                float(points[:, 0].max()),
-                float(points[:, 1].min()),
-                float(points[:, 1].max()),
-            )
-        else:
-            self.extent = None
         m = snap.edge_from.shape[0]
         segments = np.empty((m, 2, 3), dtype=np.float32)
         if m:
             segments[:, 0, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
             segments[:, 1, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
-        segments[:, :, 2] = EDGE_Z
         is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
-        self.sequential.sync(segments[~is_loop])
-        loop_colors = _PALETTE[snap.edge_cluster[is_loop] % len(CLUSTER_PALETTE)]
-        self.loops.sync(segments[is_loop], np.repeat(loop_colors[:, None, :], 2, axis=1))
+        segments[:, :, 2] = np.where(is_loop, LOOP_Z, SEQUENTIAL_Z)[:, None]
+        size = self._point_size(segments[~is_loop])
+        resized = size != self.point_size
+        self.point_size = size
+        self.vertices.sync(points, force=resized)
+        self.extent = (
+            (
+                float(points[:, 0].min()),
+                float(points[:, 0].max()),
+                float(points[:, 1].min()),
+                float(points[:, 1].max()),
+            )
+            if n
+            else None
+        )
+        self._segments = segments
+        self._snapshot = snap
+
+    @staticmethod
+    def _point_size(sequential: NDArray[np.float32]) -> float:
+        """A third of the median sequential edge, in 2 mm steps (within the bounds)."""
+        if sequential.shape[0] == 0:
+            return VERTEX_SIZE_RANGE[1]
+        lengths = np.hypot(*(sequential[:, 1, :2] - sequential[:, 0, :2]).T)
+        size = float(np.median(lengths)) / 3.0
+        size = min(max(size, VERTEX_SIZE_RANGE[0]), VERTEX_SIZE_RANGE[1])
+        return round(size / 0.002) * 0.002
+
+    def _send_edges(self, cmap: CognitiveMap, colouring: str, duration: float) -> None:
+        snap = self._snapshot
+        segments = self._segments
+        is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
+        m = segments.shape[0]
+        if colouring == "cluster":
+            colors = np.empty((m, 3), dtype=np.uint8)
+            colors[~is_loop] = SEQUENTIAL_COLOR
+            colors[is_loop] = cluster_colors(snap.edge_cluster[is_loop])
+        elif colouring == "time":
+            colors = ramp(snap.edge_time / max(duration, 1e-9), _TIME_RAMP)
+        else:
+            colors = ramp(edge_errors(cmap) / ERROR_SCALE_MAX, _ERROR_RAMP)
+        pair = np.repeat(colors[:, None, :], 2, axis=1)
+        self.edges[f"sequential/{colouring}"].sync(segments[~is_loop], pair[~is_loop])
+        self.edges[f"loop/{colouring}"].sync(segments[is_loop], pair[is_loop])
+
+    def _send_extras(self, cmap: CognitiveMap, extras: MapExtras, changed: bool) -> None:
+        transform = extras.truth_transform
+        if transform is not None and transform != self._truth_sent:
+            theta, tx, ty = transform
+            with self.server.atomic():
+                self.truth_frame.position = (tx, ty, 0.0)
+                self.truth_frame.wxyz = yaw_to_wxyz(theta)
+            self._truth_sent = transform
+        false_key = (extras.false_edge_times.size, len(cmap.optimizations))
+        if changed or false_key != self._false_key:
+            snap = self._snapshot
+            is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
+            false = is_loop & np.isin(snap.edge_time, extras.false_edge_times)
+            segments = self._segments[false].copy()
+            segments[:, :, 2] = FALSE_LOOP_Z
+            self.false_loops.sync(segments)
+            self.false_count = int(false.sum())
+            self._false_key = false_key
+
+    def update_paths(
+        self, truth: FloatArray | None, odometry: FloatArray | None, show_odometry: bool
+    ) -> None:
+        """The ground-truth path (raw frame) and the dead-reckoned one (map frame)."""
+        if truth is not None:
+            self.truth.sync(path_segments(truth, GROUND_TRUTH_Z))
+        if odometry is not None and show_odometry:
+            self.odometry.sync(path_segments(odometry, ODOMETRY_Z))
 
     def reset(self) -> None:
-        """Forget what was sent and remove the map's content (the frame stays)."""
-        for layer in (self.vertices, self.sequential, self.loops):
+        """Forget what was sent and remove the map's content (the frames stay)."""
+        for layer in (self.vertices, self.false_loops, self.truth, self.odometry):
+            layer.clear()
+        for layer in self.edges.values():
             layer.clear()
         self._map = None
         self._key = None
+        self._coloured_key.clear()
+        self._truth_sent = None
+        self._false_key = None
         self.extent = None
+        self.grid._box = None
 
 
-class GroundTruthLayer:
-    """The ground-truth path (``/ground_truth``), relative to the first ground-truth pose."""
+class Grid:
+    """A metric grid (0.1 m cells, 1 m sections) under a map, with a 1 m scale bar."""
 
-    def __init__(self, server: viser.ViserServer, stats: StreamStats) -> None:
-        """Create the (empty) layer."""
-        scene = server.scene
-        self.frame = scene.add_frame("/ground_truth", show_axes=False)
+    def __init__(self, server: viser.ViserServer, name: str) -> None:
+        """Create the (empty) grid under the frame ``name``."""
+        self.server = server
+        self.name = name
+        self._box: tuple[float, float, float, float] | None = None
 
-        def segments(name: str, part: np.ndarray, _: np.ndarray | None) -> viser.SceneNodeHandle:
-            return scene.add_line_segments(
-                name, part, colors=GROUND_TRUTH_COLOR, thickness=1.5, thickness_units="screen"
+    def cover(self, extent: tuple[float, float, float, float] | None) -> None:
+        """Cover ``extent`` (with a margin), re-sent only when it grows out of the grid."""
+        if extent is None:
+            return
+        x0, x1, y0, y1 = extent
+        box = self._box
+        if box is not None and box[0] <= x0 and box[1] >= x1 and box[2] <= y0 and box[3] >= y1:
+            return
+        x0, y0 = math.floor(x0) - 1.0, math.floor(y0) - 1.0
+        x1, y1 = math.ceil(x1) + 1.0, math.ceil(y1) + 1.0
+        self._box = (x0, x1, y0, y1)
+        scene = self.server.scene
+        with self.server.atomic():
+            scene.add_grid(
+                f"{self.name}/plane",
+                width=x1 - x0,
+                height=y1 - y0,
+                plane="xy",
+                cell_size=0.1,
+                section_size=1.0,
+                cell_color=(222, 222, 222),
+                section_color=(170, 170, 170),
+                shadow_opacity=0.0,
+                position=((x0 + x1) / 2, (y0 + y1) / 2, GRID_Z),
             )
-
-        self.path = ChunkedNodes("/ground_truth/path", segments, stats)
-        self._poses = np.zeros((0, 3))
-        self._origin: tuple[float, float, float] | None = None
-
-    def update(self, ground_truth: Sequence[tuple[float, float, float]], count: int) -> None:
-        """Show the first ``count`` poses of ``ground_truth`` (a growing list)."""
-        count = min(count, len(ground_truth))
-        have = self._poses.shape[0]
-        if count < have:
-            self._poses = self._poses[:count]
-        elif count > have:
-            new = np.asarray(ground_truth[have:count], dtype=np.float64).reshape(-1, 3)
-            if self._origin is None:
-                self._origin = (float(new[0, 0]), float(new[0, 1]), float(new[0, 2]))
-            x0, y0, t0 = self._origin
-            c, s = math.cos(-t0), math.sin(-t0)
-            dx, dy = new[:, 0] - x0, new[:, 1] - y0
-            rel = np.stack([c * dx - s * dy, s * dx + c * dy, new[:, 2] - t0], axis=1)
-            self._poses = np.concatenate([self._poses, rel])
-        if count == 0:
-            self._origin = None
-        self.path.sync(_segments_from_poses(self._poses, GROUND_TRUTH_Z))
-
-    @property
-    def visible(self) -> bool:
-        """Whether the path is shown."""
-        return bool(self.frame.visible)
-
-    @visible.setter
-    def visible(self, value: bool) -> None:
-        if bool(self.frame.visible) != value:
-            self.frame.visible = value
+            bar = np.array([[[x0 + 0.2, y0 + 0.3, 0.0], [x0 + 1.2, y0 + 0.3, 0.0]]], np.float32)
+            scene.add_line_segments(
+                f"{self.name}/scale",
+                bar,
+                colors=(40, 40, 40),
+                thickness=4.0,
+                thickness_units="screen",
+            )
+            scene.add_label(f"{self.name}/scale/label", "1 m", position=(x0 + 0.7, y0 + 0.42, 0.0))
 
 
 class SceneStreamer:
-    """All map layers and the ground truth; :meth:`publish` sends one incremental update."""
+    """All map layers and the grid; :meth:`publish` sends one incremental update.
+
+    ``needed`` are the maps and ``colourings`` the edge colourings some viewer shows (only
+    those are streamed). :meth:`show` sets the view of viewers without a view of their own (an
+    exported replay, a client that has not been set up yet).
+    """
 
     def __init__(
         self, server: viser.ViserServer, modes: Iterable[MapMode] = tuple(MapMode)
     ) -> None:
         """Create the scene's layers (empty) for ``modes``."""
         self.server = server
+        # Flat 2-D maps cast no useful shadows; without them a moving robot does not make the
+        # browser redraw shadow maps (slow without a GPU: a third of a second per update).
+        server.scene.configure_default_lights(True, cast_shadow=False)
         self.stats = StreamStats()
         self.layers: dict[MapMode, MapLayer] = {m: MapLayer(server, m, self.stats) for m in modes}
-        self.ground_truth = GroundTruthLayer(server, self.stats)
         self.shown: tuple[MapMode, ...] = ()
+        self.needed: set[MapMode] = set()
+        self.colourings: set[str] = {"cluster"}
+        self.show_odometry = False
+        self._truth = np.zeros((0, 3))
         self.show((MapMode.COMPACT,))
 
     def show(self, modes: Sequence[MapMode], show_ground_truth: bool = True) -> None:
-        """Show ``modes`` (the first at the origin, a second one beside it); hide the rest."""
+        """Default view: ``modes`` (the first at the origin, a second one beside it)."""
         self.shown = tuple(modes)
+        self.needed |= set(self.shown)
         with self.server.atomic():
             for mode, layer in self.layers.items():
                 layer.visible = mode in self.shown
-            self.ground_truth.visible = show_ground_truth
+                if layer.groups["truth"].visible != show_ground_truth:
+                    layer.groups["truth"].visible = show_ground_truth
             self._place()
+
+    def set_needed(
+        self, modes: Iterable[MapMode], colourings: Iterable[str], odometry: bool
+    ) -> None:
+        """The maps, colourings and layers some viewer shows (what :meth:`publish` streams)."""
+        self.needed = set(modes) | set(self.shown)
+        self.colourings = set(colourings) | {"cluster"}
+        self.show_odometry = odometry
 
     def _place(self) -> None:
         if not self.shown:
             return
-        first = self.layers[self.shown[0]]
-        first.offset = 0.0
-        if len(self.shown) > 1:
-            extents = [e for e in (self.layers[m].extent for m in self.shown) if e is not None]
-            width = max((e[1] - e[0] for e in extents), default=1.0)
-            step = math.ceil((width + 0.5) * 2.0) / 2.0  # in 0.5 m steps: few re-placements
-            for k, mode in enumerate(self.shown[1:], start=1):
-                self.layers[mode].offset = step * k
+        self.layers[self.shown[0]].offset = 0.0
+        step = self.side_by_side_step(self.shown)
+        for k, mode in enumerate(self.shown[1:], start=1):
+            self.layers[mode].offset = step * k
+
+    def side_by_side_step(self, modes: Sequence[MapMode]) -> float:
+        """Shift (m) between maps shown side by side: the widest map plus a margin."""
+        extents = [e for e in (self.layers[m].extent for m in modes) if e is not None]
+        width = max((e[1] - e[0] for e in extents), default=1.0)
+        return math.ceil((width + 0.5) * 2.0) / 2.0  # in 0.5 m steps: few re-placements
 
     def publish(
         self,
         maps: dict[MapMode, CognitiveMap],
         ground_truth: Sequence[tuple[float, float, float]] | None = None,
         ground_truth_count: int = 0,
+        extras: dict[MapMode, MapExtras] | None = None,
+        odometry: FloatArray | None = None,
+        duration: float = 0.0,
     ) -> None:
-        """Send what changed in the shown maps (hidden maps are brought up to date when shown)."""
+        """Send what changed in the maps viewers show (the others when they are shown)."""
         started = time.perf_counter()
+        truth = self._truth_poses(ground_truth, ground_truth_count)
         with self.server.atomic():
-            for mode in self.shown:
-                if mode in maps:
-                    self.layers[mode].update(maps[mode])
-            if ground_truth is not None:
-                self.ground_truth.update(ground_truth, ground_truth_count)
+            for mode in sorted(self.needed & set(maps), key=lambda m: m.value):
+                layer = self.layers[mode]
+                layer.update(
+                    maps[mode],
+                    sorted(self.colourings),
+                    None if extras is None else extras.get(mode),
+                    duration,
+                )
+                layer.update_paths(truth, odometry, self.show_odometry)
             self._place()
         self.stats.updates += 1
         self.stats.seconds += time.perf_counter() - started
 
+    def _truth_poses(
+        self, ground_truth: Sequence[tuple[float, float, float]] | None, count: int
+    ) -> FloatArray | None:
+        if ground_truth is None:
+            return None
+        count = min(count, len(ground_truth))
+        have = self._truth.shape[0]
+        if count < have:
+            self._truth = self._truth[:count]
+        elif count > have:
+            new = np.asarray(ground_truth[have:count], dtype=np.float64).reshape(-1, 3)
+            self._truth = np.concatenate([self._truth, new])
+        return self._truth
+
     def reset(self) -> None:
-        """Remove all map content (on restart)."""
+        """Remove all map content (a new bag)."""
         with self.server.atomic():
             for layer in self.layers.values():
                 layer.reset()
-            self.ground_truth.update([], 0)
+        self._truth = np.zeros((0, 3))
 
-    def extent(self) -> tuple[float, float, float, float] | None:
-        """Bounding box (xmin, xmax, ymin, ymax) of what is shown, offsets included."""
+    def extent(
+        self, modes: Sequence[MapMode] | None = None, offsets: Sequence[float] | None = None
+    ) -> tuple[float, float, float, float] | None:
+        """Bounding box (xmin, xmax, ymin, ymax) of ``modes`` (default: the shown ones).
+
+        ``offsets``: their shifts along x (default: the default view's).
+        """
+        modes = self.shown if modes is None else tuple(modes)
         boxes = []
-        for mode in self.shown:
+        for k, mode in enumerate(modes):
             layer = self.layers[mode]
             if layer.extent is not None:
+                shift = layer.offset if offsets is None else offsets[k]
                 x0, x1, y0, y1 = layer.extent
-                boxes.append((x0 + layer.offset, x1 + layer.offset, y0, y1))
+                boxes.append((x0 + shift, x1 + shift, y0, y1))
         if not boxes:
             return None
         return (

@@ -20,7 +20,9 @@ value.
   back as usual; a refused one is dropped, and the value in force is sent back to every client
   so that the sender's control shows it again.
 
-Refusals and adjustments are reported to ``note`` (one line each) when given.
+Refusals and adjustments are reported to ``note`` (one line each) when given; a check may word
+its adjustment itself by returning :class:`Adjusted`. The same gate guards a client's own
+controls (``ClientHandle.gui``: the per-viewer view settings).
 """
 
 from __future__ import annotations
@@ -42,6 +44,14 @@ _MAX_TEXT = 4096
 
 class Refused(ValueError):
     """A GUI value that cannot be used; the message says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class Adjusted:
+    """A check's answer: apply ``value`` instead of what was sent, and say ``message``."""
+
+    value: Any
+    message: str
 
 
 def choice(options: Sequence[str] | Callable[[], Sequence[str]]) -> Check:
@@ -143,18 +153,24 @@ class GuiGate:
     """Checks GUI updates from clients before viser's own handler sees them.
 
     Args:
-        server: the viser server whose global GUI to protect.
+        server: the viser server.
         note: where to report refusals and adjustments (default: nowhere).
+        gui: the GUI to protect (default: the server's global one; or a client's own).
 
     """
 
-    def __init__(self, server: viser.ViserServer, note: Note | None = None) -> None:
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        note: Note | None = None,
+        gui: viser.GuiApi | None = None,
+    ) -> None:
         """Put the gate in front of viser's handler of GUI updates."""
         self.server = server
         self.note = note
         self._guards: dict[str, _Guard] = {}
         self.refused = 0
-        gui = server.gui
+        gui = gui if gui is not None else server.gui
         # viser has no public hook before it applies an update: its handler is swapped for ours.
         self._websock = gui._websock_interface
         self._original: Handler = gui._handle_gui_updates
@@ -191,6 +207,9 @@ class GuiGate:
             value = check(sent)
         except Refused as exc:
             return self._refuse(handle, label, str(exc), note)
+        wording = None
+        if isinstance(value, Adjusted):
+            value, wording = value.value, value.message
         result = self._original(
             client_id, _messages.GuiUpdateMessage(message.uuid, {"value": value})
         )
@@ -200,7 +219,7 @@ class GuiGate:
             if not handle._impl.is_button:
                 self._resend(handle)
             if note is not None and value != sent:
-                note(f"{label} = {sent!r} is out of range: set to {value!r}")
+                note(wording or f"{label} = {sent!r} is out of range: set to {value!r}")
         return None
 
     def _refuse(self, handle: Any, label: str, reason: str, note: Note | None) -> None:
@@ -209,6 +228,11 @@ class GuiGate:
             self._resend(handle)
         if note is not None:
             note(f"refused {label}: {reason}; kept {handle._impl.value!r}")
+
+    def close(self) -> None:
+        """Give viser its own handler back."""
+        self._websock.unregister_handler(_messages.GuiUpdateMessage, self._handle)
+        self._websock.register_handler(_messages.GuiUpdateMessage, self._original)
 
     def _resend(self, handle: Any) -> None:
         """Send the value in force to every client (the sender's control shows it again)."""

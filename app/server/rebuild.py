@@ -1,0 +1,599 @@
+"""Rebuilding maps for new parameters: worker processes, a cache, and exact shortcuts.
+
+A parameter change rebuilds maps from the session's cached front-end events (see
+:mod:`app.server.replay`). Three things make that fast without changing a single number of the
+result -- every map is exactly what ``CognitiveMap(mode, params)`` fed the same events gives, as
+``SlamSession.rebuild`` and ``cogmap run`` do:
+
+- :class:`ProcessBuilder`: the maps are rebuilt in worker processes (one per core), each of which
+  holds a copy of the events (sent once, then only the new ones), so only the parameters go out
+  and the finished map (a pickle of a few hundred kB) comes back. The displayed map is started
+  first; two maps build at the same time on two cores; the page's process stays free to serve
+  the browsers. A newer request abandons the builds in flight within one chunk of events.
+- :class:`MapCache`: maps built for parameters met before (a slider moved back, "reset to paper
+  values") are kept and reused.
+- :func:`same_schedule`: the clustering thresholds ``T_interval`` and ``T_total`` act on a map only
+  through the schedule of loop-closure clusters (which links form a cluster, at which event it
+  closes and the map is optimised). When that schedule over the events so far is the same for
+  the old and the new values, the map is the same and is kept.
+
+:class:`ThreadBuilder` does the same work on the calling thread (no worker processes).
+"""
+
+from __future__ import annotations
+
+import atexit
+import multiprocessing.connection
+import os
+import pickle
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import traceback
+from collections import OrderedDict
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.event_file import KIND_LINK
+from cogmap_core.events import MapEvent
+from cogmap_core.slam import EventLog
+
+#: Events applied between two checks for a newer request during a rebuild.
+REBUILD_CHUNK = 1000
+#: How often (s) a waiting builder checks whether its request was superseded.
+POLL_S = 0.005
+
+#: The parameters of the loop-closure clustering (the cluster schedule).
+SCHEDULE_PARAMS = frozenset({"t_interval", "t_total"})
+
+Interrupted = Callable[[], bool]
+
+
+class Abandoned(Exception):
+    """A newer request arrived while maps were being built."""
+
+
+@dataclass(frozen=True, slots=True)
+class BuildTask:
+    """One map to build: ``mode`` with ``params`` from the first ``frames`` frames of the log.
+
+    Attributes:
+        mode: which map.
+        params: its parameters.
+        frames: frames of the event log to apply.
+        finish: run the end-of-data optimisation afterwards.
+
+    """
+
+    mode: MapMode
+    params: MapParams
+    frames: int
+    finish: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Built:
+    """A finished build: the map and how long it took (s) where it was built."""
+
+    task: BuildTask
+    cmap: CognitiveMap
+    compute_s: float
+
+
+def build_map(
+    log: EventLog, task: BuildTask, interrupted: Interrupted | None = None
+) -> CognitiveMap:
+    """What ``SlamSession.rebuild`` does for one map, abandoned when ``interrupted()`` says so.
+
+    Raises:
+        Abandoned: ``interrupted()`` returned True between two chunks of events.
+
+    """
+    end = log.frame_end[task.frames - 1] if task.frames else 0
+    cmap = CognitiveMap(task.mode, task.params)
+    for lo in range(0, end, REBUILD_CHUNK):
+        if interrupted is not None and interrupted():
+            raise Abandoned
+        cmap.apply_all(log.events[lo : min(lo + REBUILD_CHUNK, end)])
+    if task.finish and task.frames:
+        cmap.finish(log.frame_time[task.frames - 1])
+    if interrupted is not None and interrupted():
+        raise Abandoned
+    return cmap
+
+
+# ---------------------------------------------------------------------------------- schedule
+def cluster_schedule(
+    times: NDArray[np.float64],
+    link_index: NDArray[np.int64],
+    end: int,
+    finish: bool,
+    t_interval: float,
+    t_total: float,
+) -> tuple[tuple[int, int, int], ...]:
+    """The loop-closure cluster schedule of ``events[:end]``, as a map's clusterer makes it.
+
+    ``times`` are the data times of all events, ``link_index`` the positions of the links among
+    them (ascending). Returns, per cluster, (its first link's event index, its last link's event
+    index, the index of the event at which it closes -- ``end`` when it closes at the end of the
+    data, -1 when it is still open). Two parameter sets with the same schedule build the same
+    map when they differ only in ``t_interval`` and ``t_total``
+    (:class:`~cogmap_core.clustering.LoopClosureClusterer` semantics, reproduced exactly).
+    """
+    links = link_index[link_index < end]
+    if links.size == 0:
+        return ()
+    t_links = times[links].tolist()
+    starts = [0]
+    start = last = t_links[0]
+    for i in range(1, len(t_links)):
+        t = t_links[i]
+        if t - last < t_interval and t - start <= t_total:
+            last = t
+        else:
+            starts.append(i)
+            start = last = t
+    bounds = starts + [len(t_links)]
+    index = links.tolist()
+    out: list[tuple[int, int, int]] = []
+    for c in range(len(starts)):
+        first, last_link = index[bounds[c]], index[bounds[c + 1] - 1]
+        t_start, t_last = float(times[first]), float(times[last_link])
+        close = min(
+            _first_past(times, last_link + 1, end, t_last, t_interval, inclusive=True),
+            _first_past(times, last_link + 1, end, t_start, t_total, inclusive=False),
+        )
+        if close >= end:
+            close = end if finish else -1
+        out.append((first, last_link, close))
+    return tuple(out)
+
+
+def _first_past(
+    times: NDArray[np.float64], lo: int, hi: int, since: float, limit: float, inclusive: bool
+) -> int:
+    """The first index in ``[lo, hi)`` with ``t - since >= limit`` (``>`` unless ``inclusive``).
+
+    Evaluated exactly as the clusterer does (a difference of two floats); times do not decrease,
+    so the predicate is monotonic and a binary search finds it. ``hi`` when there is none.
+    """
+    while lo < hi:
+        mid = (lo + hi) // 2
+        gap = float(times[mid]) - since
+        if gap >= limit if inclusive else gap > limit:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+class ScheduleIndex:
+    """Event times and link positions of a log (read from its columns, no copy kept)."""
+
+    def arrays(self, log: EventLog) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """``times`` of every event of ``log`` and the indices of its links."""
+        columns = log.columns()
+        return columns["time"], np.flatnonzero(columns["kind"] == KIND_LINK)
+
+
+def same_schedule(
+    index: ScheduleIndex,
+    log: EventLog,
+    frames: int,
+    finish: bool,
+    old: MapParams,
+    new: MapParams,
+) -> bool:
+    """Whether a map built with ``old`` is exactly the map built with ``new`` (module doc).
+
+    True only when the two differ in nothing but ``t_interval``/``t_total`` and those give the same
+    cluster schedule over the first ``frames`` frames.
+    """
+    changed = {k for k, v in old.to_dict().items() if getattr(new, k) != v}
+    if not changed or not changed <= SCHEDULE_PARAMS:
+        return not changed
+    times, links = index.arrays(log)
+    end = log.frame_end[frames - 1] if frames else 0
+    return cluster_schedule(times, links, end, finish, old.t_interval, old.t_total) == (
+        cluster_schedule(times, links, end, finish, new.t_interval, new.t_total)
+    )
+
+
+# ---------------------------------------------------------------------------------- cache
+CacheKey = tuple[MapMode, tuple[tuple[str, float], ...], int, bool, int]
+
+
+class MapCache:
+    """Maps built before, by map, the parameters it uses, frames and end-of-data state.
+
+    A map in the cache is never the session's current map (which playback extends): maps enter
+    when they are replaced and leave when they are adopted again.
+    """
+
+    def __init__(self, size: int = 4, uses: dict[MapMode, frozenset[str]] | None = None) -> None:
+        """Keep at most ``size`` maps per mode; ``uses``: the parameters each map depends on."""
+        self.size = size
+        self.uses = uses or {}
+        self._maps: OrderedDict[CacheKey, CognitiveMap] = OrderedDict()
+        self.hits = 0
+
+    def key(
+        self, mode: MapMode, params: MapParams, frames: int, finish: bool, log: int
+    ) -> CacheKey:
+        """The cache key of a map (only the parameters the map uses count)."""
+        names = self.uses.get(mode) or frozenset(params.to_dict())
+        values = tuple(sorted((n, float(getattr(params, n))) for n in names))
+        return (mode, values, frames, finish, log)
+
+    def put(self, key: CacheKey, cmap: CognitiveMap) -> None:
+        """Keep ``cmap`` (the oldest map of its mode goes when the mode has ``size``)."""
+        self._maps[key] = cmap
+        self._maps.move_to_end(key)
+        same = [k for k in self._maps if k[0] == key[0]]
+        for old in same[: max(0, len(same) - self.size)]:
+            del self._maps[old]
+
+    def take(self, key: CacheKey) -> CognitiveMap | None:
+        """Remove and return the map stored under ``key`` (None when there is none)."""
+        cmap = self._maps.pop(key, None)
+        if cmap is not None:
+            self.hits += 1
+        return cmap
+
+    def clear(self) -> None:
+        """Forget every map."""
+        self._maps.clear()
+
+    def __len__(self) -> int:
+        """Maps held."""
+        return len(self._maps)
+
+
+# ---------------------------------------------------------------------------------- builders
+class ThreadBuilder:
+    """Builds maps one after the other on the calling thread."""
+
+    workers = 0
+
+    def build(
+        self, log: EventLog, tasks: Sequence[BuildTask], interrupted: Interrupted
+    ) -> Iterator[Built]:
+        """Build ``tasks`` in order, yielding each map when done.
+
+        Raises:
+            Abandoned: ``interrupted()`` became true.
+
+        """
+        for task in tasks:
+            started = time.perf_counter()
+            cmap = build_map(log, task, interrupted)
+            yield Built(task, cmap, time.perf_counter() - started)
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def prepare(self, log: EventLog) -> None:
+        """Nothing to send."""
+
+    def close(self) -> None:
+        """Nothing to stop."""
+
+
+def _worker_main(conn: multiprocessing.connection.Connection) -> None:
+    """A rebuild worker: holds a copy of the event log and builds maps on request.
+
+    While it builds, a ``("cancel",)`` message makes it drop the build (checked between chunks).
+    """
+    log = EventLog()
+
+    def cancelled() -> bool:
+        if conn.poll(0):
+            message = conn.recv()
+            return bool(message[0] == "cancel")
+        return False
+
+    while True:
+        try:
+            message = conn.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        kind = message[0]
+        if kind == "stop":
+            return
+        if kind == "reset":
+            log = EventLog()
+        elif kind == "append":
+            _, columns, frame_end, frame_time = message
+            log.extend(columns, frame_end, frame_time)
+        elif kind == "build":
+            _, task_id, task = message
+            started = time.perf_counter()
+            try:
+                cmap = build_map(log, task, cancelled)
+            except Abandoned:
+                conn.send(("abandoned", task_id))
+                continue
+            except Exception as exc:  # reported to the app, which shows it
+                conn.send(("error", task_id, f"{type(exc).__name__}: {exc}"))
+                continue
+            payload = pickle.dumps(cmap, protocol=pickle.HIGHEST_PROTOCOL)
+            conn.send(("done", task_id, payload, time.perf_counter() - started))
+        # ("cancel",) arriving while idle: the build it meant is over already
+
+
+class _Worker:
+    """One worker process (``python -m app.server.rebuild``) and the log it holds."""
+
+    def __init__(self) -> None:
+        parent, child = socket.socketpair()
+        env = dict(os.environ)
+        paths = [p for p in sys.path if p]
+        env["PYTHONPATH"] = os.pathsep.join(paths)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "app.server.rebuild", str(child.fileno())],
+            pass_fds=[child.fileno()],
+            stdin=subprocess.DEVNULL,
+            env=env,
+        )
+        child.close()
+        self.conn = multiprocessing.connection.Connection(parent.detach())
+        self.log: EventLog | None = None  # the log whose events it holds
+        self.events = 0  # events of that log sent so far
+        self.frames = 0
+        self.busy: int | None = None  # task id in flight
+
+    @property
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def stop(self) -> None:
+        try:
+            self.conn.send(("stop",))
+        except (OSError, ValueError):
+            pass
+        try:
+            self.process.wait(2.0)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait(2.0)
+        self.conn.close()
+
+
+class WorkerPool:
+    """Rebuild worker processes, started once per process and shared by every builder."""
+
+    def __init__(self, size: int) -> None:
+        """Start ``size`` workers in the background (the first build waits for them)."""
+        self.size = size
+        self.workers: list[_Worker] = []
+        self.failed: str | None = None
+        self.lock = threading.Lock()  # one build at a time
+        self._ready = threading.Event()
+        threading.Thread(target=self._start, name="cogmap-rebuild-start", daemon=True).start()
+
+    def _start(self) -> None:
+        try:
+            self.workers = [_Worker() for _ in range(self.size)]
+        except Exception as exc:  # no worker processes: builds run on the calling thread
+            self.failed = f"{type(exc).__name__}: {exc}"
+            print(f"cogmap serve: rebuild workers unavailable ({self.failed})", file=sys.stderr)
+        finally:
+            self._ready.set()
+
+    @property
+    def ready(self) -> bool:
+        """Whether the workers were started (successfully or not)."""
+        return self._ready.is_set()
+
+    def available(self) -> bool:
+        """Whether the workers run (waits for them to start)."""
+        self._ready.wait()
+        return self.failed is None and bool(self.workers) and all(w.alive for w in self.workers)
+
+    def close(self) -> None:
+        """Stop the workers."""
+        self._ready.wait()
+        for worker in self.workers:
+            worker.stop()
+        self.workers = []
+
+
+_POOL: WorkerPool | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def worker_pool(size: int) -> WorkerPool:
+    """The process's pool of at least ``size`` rebuild workers (started on first use)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL.size < size or (_POOL.ready and not _POOL.available()):
+            if _POOL is not None:
+                _POOL.close()
+            _POOL = WorkerPool(size)
+            atexit.register(_POOL.close)
+        return _POOL
+
+
+class ProcessBuilder:
+    """Builds maps in worker processes, at most one map per worker at a time (module doc).
+
+    Args:
+        workers: worker processes to use (the machine's cores, for a start).
+
+    """
+
+    def __init__(self, workers: int = 2) -> None:
+        """Use (and start, the first time) the process's worker pool."""
+        self.workers = workers
+        self.pool = worker_pool(workers)
+        self._next_task = 0
+
+    def _pool_workers(self) -> list[_Worker]:
+        return self.pool.workers[: self.workers]
+
+    def reset(self) -> None:
+        """Nothing to do: workers notice a new log by themselves."""
+
+    def prepare(self, log: EventLog) -> None:
+        """Send every worker the events of ``log`` it does not have yet (while nothing builds)."""
+        if not self.pool.ready or not self.pool.lock.acquire(blocking=False):
+            return
+        try:
+            if self.pool.available():
+                for worker in self._pool_workers():
+                    self._sync(worker, log)
+        finally:
+            self.pool.lock.release()
+
+    @staticmethod
+    def _sync(worker: _Worker, log: EventLog) -> None:
+        if worker.log is not log or worker.frames > log.frames:  # another log: start over
+            worker.conn.send(("reset",))
+            worker.log, worker.events, worker.frames = log, 0, 0
+        frames = log.frames
+        if worker.frames == frames:
+            return
+        end = log.frame_end[frames - 1] if frames else 0
+        columns = {name: column[worker.events : end] for name, column in log.columns(end).items()}
+        worker.conn.send(
+            (
+                "append",
+                columns,
+                np.array(log.frame_end[worker.frames : frames]),
+                np.array(log.frame_time[worker.frames : frames]),
+            )
+        )
+        worker.events, worker.frames = end, frames
+
+    def build(
+        self, log: EventLog, tasks: Sequence[BuildTask], interrupted: Interrupted
+    ) -> Iterator[Built]:
+        """Build ``tasks`` on the workers (in order of priority), yielding maps as they finish.
+
+        Raises:
+            Abandoned: ``interrupted()`` became true (the workers drop what they build).
+            RuntimeError: a worker failed.
+
+        """
+        if not tasks:
+            return
+        if not self.pool.available():
+            yield from ThreadBuilder().build(log, tasks, interrupted)
+            return
+        with self.pool.lock:
+            yield from self._build(log, tasks, interrupted)
+
+    def _build(
+        self, log: EventLog, tasks: Sequence[BuildTask], interrupted: Interrupted
+    ) -> Iterator[Built]:
+        workers = self._pool_workers()
+        pending = list(tasks)
+        running: dict[int, tuple[_Worker, BuildTask]] = {}
+        try:
+            while pending or running:
+                for worker in workers:
+                    if pending and worker.busy is None:
+                        task = pending.pop(0)
+                        self._sync(worker, log)
+                        self._next_task += 1
+                        worker.busy = self._next_task
+                        worker.conn.send(("build", self._next_task, task))
+                        running[self._next_task] = (worker, task)
+                if interrupted():
+                    raise Abandoned
+                ready = multiprocessing.connection.wait(
+                    [w.conn for w, _ in running.values()], timeout=POLL_S
+                )
+                for conn in ready:
+                    worker = next(w for w in workers if w.conn is conn)
+                    reply = self._receive(worker)
+                    worker.busy = None
+                    _, task = running.pop(reply[1])
+                    if reply[0] == "done":
+                        yield Built(task, pickle.loads(reply[2]), float(reply[3]))
+                    elif reply[0] == "error":
+                        raise RuntimeError(f"rebuild of the {task.mode.value} map: {reply[2]}")
+                    else:  # abandoned: only after a cancel, which was raised already
+                        raise Abandoned
+        except BaseException:
+            self._cancel(workers)
+            raise
+
+    def _receive(self, worker: _Worker) -> tuple[Any, ...]:
+        try:
+            return worker.conn.recv()  # type: ignore[no-any-return]
+        except (EOFError, OSError):
+            raise RuntimeError("a rebuild worker exited; restart the server") from None
+
+    @staticmethod
+    def _cancel(workers: list[_Worker]) -> None:
+        """Make the busy workers drop their builds, and wait for each one's reply."""
+        for worker in workers:
+            if worker.busy is not None:
+                try:
+                    worker.conn.send(("cancel",))
+                except (OSError, ValueError):
+                    worker.busy = None
+        for worker in workers:
+            if worker.busy is None:
+                continue
+            try:
+                if worker.conn.poll(30.0):
+                    worker.conn.recv()
+            except (EOFError, OSError):
+                pass
+            worker.busy = None
+
+    def close(self) -> None:
+        """Stop using the workers (they stay for the next builder of this process)."""
+
+
+Builder = ThreadBuilder | ProcessBuilder
+
+
+def make_builder(workers: int) -> Builder:
+    """Worker processes when ``workers`` > 0 and they can start, else the calling thread."""
+    if workers <= 0:
+        return ThreadBuilder()
+    try:
+        return ProcessBuilder(workers)
+    except Exception:
+        traceback.print_exc(file=sys.stderr)
+        return ThreadBuilder()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m app.server.rebuild FD``: a worker talking over the socket ``FD``."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the server stops its workers itself
+    _worker_main(multiprocessing.connection.Connection(int(args[0])))
+    return 0
+
+
+__all__ = [
+    "Abandoned",
+    "BuildTask",
+    "Built",
+    "MapCache",
+    "MapEvent",
+    "ProcessBuilder",
+    "ScheduleIndex",
+    "ThreadBuilder",
+    "build_map",
+    "cluster_schedule",
+    "make_builder",
+    "same_schedule",
+]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,772 @@
+"""Each viewer's own view: which map, side by side, layers, colours, camera, inspection, pin.
+
+Parameters and playback are shared by everyone viewing a server; what a viewer *looks at* is
+theirs. A :class:`ClientView` is made for every browser tab when it connects:
+
+- its controls are client-scoped GUI elements placed in the page's shared folders (viser shows
+  them to that tab only), checked by their own :class:`~app.server.validation.GuiGate`;
+- the maps are streamed once for everyone (:mod:`app.server.scene`); a view shows, hides and
+  places them with *client-scoped frames of the same names* (viser lets a client's node of a
+  name shadow the shared one for that client only): ``/map/<mode>`` (shown? where?), its layer
+  frames and colouring frames, ``/grid``;
+- the camera frames what the view shows, left of the control panel, and follows the map as it
+  grows until the viewer moves the camera;
+- a click on the map selects the nearest vertex or edge and shows what is known about it;
+- "pin" keeps a copy of the shown map (with its parameters and figures) drawn beside or under
+  the live one, with a table comparing the two.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import viser
+from numpy.typing import NDArray
+
+from app.server.params import ALL_SLIDERS, format_value
+from app.server.scene import (
+    COLOURINGS,
+    ERROR_RAMP_CSS,
+    ERROR_SCALE_MAX,
+    FALSE_LOOP_COLOR,
+    GROUND_TRUTH_COLOR,
+    LAYERS,
+    MAP_COLORS,
+    ODOMETRY_COLOR,
+    PINNED_COLOR,
+    SELECTION_COLOR,
+    SEQUENTIAL_COLOR,
+    TIME_RAMP_CSS,
+    cluster_color,
+    edge_errors,
+)
+from app.server.validation import GuiGate, boolean, choice, click
+from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
+from cogmap_core.config import MapParams
+from cogmap_core.map_graph import MapSnapshot
+
+if TYPE_CHECKING:
+    from app.server.app import CogmapApp
+
+MODE_NAMES: tuple[str, ...] = tuple(m.value for m in MapMode)
+COLOURING_LABELS: dict[str, str] = {
+    "cluster": "loop closures by cluster",
+    "time": "time",
+    "error": "error (residual)",
+}
+LAYER_LABELS: dict[str, str] = {
+    "vertices": "vertices",
+    "sequential": "sequential edges",
+    "loop": "loop-closure edges",
+    "false_loops": "false loop closures",
+    "truth": "ground truth",
+    "odometry": "dead-reckoned odometry",
+    "grid": "metric grid",
+}
+PIN_DISPLAYS: tuple[str, ...] = ("beside", "under")
+
+# A tab can close while its view is being updated; viser then warns that the message will not
+# be delivered. That is expected here, not a problem worth a warning.
+warnings.filterwarnings(
+    "ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning
+)
+#: The control panel's width on the page (px), left out when the camera frames the maps.
+PANEL_PX = 430
+#: A click selects what lies within this many pixels.
+PICK_PX = 10.0
+
+
+def rgb(color: tuple[int, int, int]) -> str:
+    """CSS colour."""
+    return f"rgb({color[0]},{color[1]},{color[2]})"
+
+
+def swatch(color: tuple[int, int, int]) -> str:
+    """A small coloured square (legends)."""
+    return f'<span class="cogmap-swatch" style="background:{rgb(color)}"></span>'
+
+
+@dataclass
+class ViewState:
+    """What one viewer looks at."""
+
+    mode: MapMode = MapMode.COMPACT
+    compare: bool = False
+    compare_mode: MapMode = MapMode.STANDARD
+    colouring: str = "cluster"
+    layers: dict[str, bool] = field(
+        default_factory=lambda: {
+            "vertices": True,
+            "sequential": True,
+            "loop": True,
+            "false_loops": True,
+            "truth": True,
+            "odometry": False,
+            "grid": True,
+        }
+    )
+    follow: bool = True
+    pin_display: str = "beside"
+
+    @property
+    def shown(self) -> tuple[MapMode, ...]:
+        """The displayed map and, side by side, the compared one."""
+        if self.compare and self.compare_mode is not self.mode:
+            return (self.mode, self.compare_mode)
+        return (self.mode,)
+
+
+@dataclass
+class PinnedMap:
+    """A copy of a map kept to compare with the live one."""
+
+    mode: MapMode
+    params: MapParams
+    snapshot: MapSnapshot
+    stats: dict[str, str]
+    frames: int
+    data_time: float
+    bag: str
+
+
+@dataclass(frozen=True, slots=True)
+class Pick:
+    """What a click selected: a vertex or an edge of a shown map."""
+
+    mode: MapMode
+    kind: str  # "vertex" or "edge"
+    index: int  # into the snapshot's vertices or edges
+    html: str
+    segment: NDArray[np.float64]  # (2, 2) the edge's ends, or the vertex twice
+
+
+class ClientView:
+    """The view of one browser tab (module doc)."""
+
+    def __init__(self, app: CogmapApp, client: viser.ClientHandle) -> None:
+        """Build the tab's controls and shadows, and frame its camera."""
+        self.app = app
+        self.client = client
+        self.state = ViewState()
+        self.pinned: PinnedMap | None = None
+        self.pick: Pick | None = None
+        self._lock = threading.RLock()
+        self._shadows: dict[str, viser.FrameHandle] = {}
+        self._shadow_state: dict[str, tuple[bool, float]] = {}
+        self._pinned_nodes: list[viser.SceneNodeHandle] = []
+        self._pinned_frame: viser.FrameHandle | None = None
+        self._selection: list[viser.SceneNodeHandle] = []
+        self._framed: tuple[float, float, float, float] | None = None
+        self._camera_set_at = -math.inf
+        self._camera_expected: NDArray[np.float64] | None = None
+        self._camera_acknowledged = False
+        self._log_key: tuple[Any, ...] | None = None
+        self._compare_key: tuple[Any, ...] | None = None
+        self._setting = False
+        self.closed = False
+        self._build_gui()
+        self._guard()
+        self.client.scene.on_click()(self._on_click)
+        self.client.camera.on_update(self._on_camera)
+        self.apply(reframe=True)
+
+    # ================================================================== controls
+    def _build_gui(self) -> None:
+        gui = self.client.gui
+        app = self.app
+        s = self.state
+        with app.view_folder:
+            self.mode_dropdown = gui.add_dropdown("map", MODE_NAMES, initial_value=s.mode.value)
+            self.compare_checkbox = gui.add_checkbox("side by side", s.compare)
+            self.compare_dropdown = gui.add_dropdown(
+                "compare with", MODE_NAMES, initial_value=s.compare_mode.value
+            )
+            self.colouring_dropdown = gui.add_dropdown(
+                "colour edges by",
+                tuple(COLOURING_LABELS.values()),
+                initial_value=COLOURING_LABELS["cluster"],
+            )
+            with gui.add_folder("Layers", expand_by_default=False):
+                self.layer_checkboxes = {
+                    name: gui.add_checkbox(label, s.layers[name])
+                    for name, label in LAYER_LABELS.items()
+                }
+            self.follow_checkbox = gui.add_checkbox(
+                "follow the map", s.follow, hint="re-frame the camera as the map grows"
+            )
+            self.top_button = gui.add_button("top view", icon=viser.Icon.MAP_2)
+            self.view3d_button = gui.add_button("3-D view", icon=viser.Icon.VIEW_360)
+            self.legend_html = gui.add_html("")
+        with app.inspect_folder:
+            self.inspect_html = gui.add_html(
+                '<div class="cogmap-note" id="cogmap-inspect">Click a vertex or an edge of '
+                "the map to see what it is.</div>"
+            )
+            self.clear_button = gui.add_button("clear selection", icon=viser.Icon.X)
+        with app.compare_folder:
+            self.pin_button = gui.add_button("pin the shown map", icon=viser.Icon.PIN)
+            self.pin_dropdown = gui.add_dropdown(
+                "pinned map", PIN_DISPLAYS, initial_value=s.pin_display
+            )
+            self.unpin_button = gui.add_button("unpin", icon=viser.Icon.PINNED_OFF)
+            self.compare_html = gui.add_html(
+                '<div class="cogmap-note" id="cogmap-compare">Pin the shown map, change the '
+                "parameters, and compare the two here and in the scene.</div>"
+            )
+        with app.clusters_folder:
+            self.log_html = gui.add_html("")
+        for handle in (
+            self.mode_dropdown,
+            self.compare_checkbox,
+            self.compare_dropdown,
+            self.colouring_dropdown,
+            self.follow_checkbox,
+            self.pin_dropdown,
+            *self.layer_checkboxes.values(),
+        ):
+            handle.on_update(lambda _: self._read_controls())
+        self.top_button.on_click(lambda _: self.frame_camera(top=True))
+        self.view3d_button.on_click(lambda _: self.frame_camera(top=False))
+        self.clear_button.on_click(lambda _: self.select(None))
+        self.pin_button.on_click(lambda _: self.pin())
+        self.unpin_button.on_click(lambda _: self.unpin())
+
+    def _guard(self) -> None:
+        gate = self.gate = GuiGate(self.app.server, gui=self.client.gui)
+        gate.guard(self.mode_dropdown, choice(MODE_NAMES))
+        gate.guard(self.compare_dropdown, choice(MODE_NAMES))
+        gate.guard(self.colouring_dropdown, choice(tuple(COLOURING_LABELS.values())))
+        gate.guard(self.pin_dropdown, choice(PIN_DISPLAYS))
+        checkboxes = (self.compare_checkbox, self.follow_checkbox, *self.layer_checkboxes.values())
+        for handle in checkboxes:
+            gate.guard(handle, boolean())
+        for button in (
+            self.top_button,
+            self.view3d_button,
+            self.clear_button,
+            self.pin_button,
+            self.unpin_button,
+        ):
+            gate.guard(button, click())
+
+    def _read_controls(self) -> None:
+        if self._setting:
+            return
+        s = self.state
+        labels = {v: k for k, v in COLOURING_LABELS.items()}
+        before = (s.shown, s.pin_display)
+        s.mode = MapMode(self.mode_dropdown.value)
+        s.compare = bool(self.compare_checkbox.value)
+        s.compare_mode = MapMode(self.compare_dropdown.value)
+        s.colouring = labels.get(self.colouring_dropdown.value, "cluster")
+        s.layers = {name: bool(box.value) for name, box in self.layer_checkboxes.items()}
+        s.pin_display = self.pin_dropdown.value
+        follow = bool(self.follow_checkbox.value)
+        refollow = follow and not s.follow
+        s.follow = follow
+        self.apply(reframe=refollow or (s.follow and before != (s.shown, s.pin_display)))
+
+    def set_mode(self, mode: MapMode, compare: MapMode | None = None) -> None:
+        """Show ``mode`` (and ``compare`` beside it); as if the viewer chose it."""
+        self._setting = True
+        try:
+            self.mode_dropdown.value = mode.value
+            self.compare_checkbox.value = compare is not None
+            if compare is not None:
+                self.compare_dropdown.value = compare.value
+        finally:
+            self._setting = False
+        self._read_controls()
+
+    # ================================================================== scene
+    def offsets(self) -> dict[str, float]:
+        """Shift along x (m) of each shown map, and of the pinned map (``"pinned"``)."""
+        shown = self.state.shown
+        step = self.app.streamer.side_by_side_step(shown)
+        out = {mode.value: step * k for k, mode in enumerate(shown)}
+        if self.pinned is not None:
+            if self.state.pin_display == "under":
+                out["pinned"] = 0.0
+            else:
+                widest = self.app.streamer.side_by_side_step(shown)
+                pinned_width = _extent_width(self.pinned.snapshot)
+                out["pinned"] = step * (len(shown) - 1) + max(widest, pinned_width + 0.5)
+        return out
+
+    def apply(self, reframe: bool = False) -> None:
+        """Bring the tab's shadows, legend and the streamer's needs up to date."""
+        if self.closed:
+            return
+        with self.app.replay.lock, self.app.scene_lock, self._lock:
+            s = self.state
+            offsets = self.offsets()
+            wanted: dict[str, tuple[bool, float]] = {}
+            for mode in MapMode:
+                root = f"/map/{mode.value}"
+                wanted[root] = (mode in s.shown, offsets.get(mode.value, 0.0))
+                for layer in LAYERS:
+                    wanted[f"{root}/{layer}"] = (s.layers[layer], 0.0)
+                for kind in ("sequential", "loop"):
+                    for colouring in COLOURINGS:
+                        wanted[f"{root}/{kind}/{colouring}"] = (colouring == s.colouring, 0.0)
+            with self.client.atomic():
+                for name, (visible, x) in wanted.items():
+                    self._shadow(name, visible, x)
+                if self._pinned_frame is not None:
+                    self._pinned_frame.position = (offsets.get("pinned", 0.0), 0.0, -0.002)
+            self.legend_html.content = self._legend()
+            self.app.views_changed()
+            self._log_key = None
+            self._compare_key = None
+        self.refresh()
+        if reframe or (s.follow and self._framed is None):
+            self.frame_camera(top=True)
+
+    def _shadow(self, name: str, visible: bool, x: float) -> None:
+        if self._shadow_state.get(name) == (visible, x):
+            return
+        handle = self._shadows.get(name)
+        if handle is None:
+            self._shadows[name] = self.client.scene.add_frame(
+                name, show_axes=False, visible=visible, position=(x, 0.0, 0.0)
+            )
+        else:
+            if handle.visible != visible:
+                handle.visible = visible
+            if tuple(handle.position) != (x, 0.0, 0.0):
+                handle.position = (x, 0.0, 0.0)
+        self._shadow_state[name] = (visible, x)
+
+    def _legend(self) -> str:
+        s = self.state
+        parts = [
+            " ".join(f"{swatch(MAP_COLORS[m])}{m.value} vertices" for m in s.shown),
+        ]
+        if s.colouring == "cluster":
+            parts.append(
+                f"{swatch(SEQUENTIAL_COLOR)}sequential edges · loop-closure edges coloured by "
+                "cluster (see <i>Clusters &amp; optimisations</i>)"
+            )
+        elif s.colouring == "time":
+            parts.append(
+                f'edges by creation time: 0 s <span class="cogmap-ramp" '
+                f'style="background:{TIME_RAMP_CSS}"></span> end of the data'
+            )
+        else:
+            parts.append(
+                f'edges by error (whitened residual ‖S r‖): 0 <span class="cogmap-ramp" '
+                f'style="background:{ERROR_RAMP_CSS}"></span> ≥ {ERROR_SCALE_MAX:g} σ'
+            )
+        parts.append(
+            f"{swatch(FALSE_LOOP_COLOR)}loop closures the ground truth calls false (position "
+            "0.1 m, heading 10°)"
+        )
+        parts.append(
+            f"{swatch(GROUND_TRUTH_COLOR)}ground truth, aligned to each map by the rigid "
+            "transform of the ATE (least squares over the vertices)"
+        )
+        if s.layers["odometry"]:
+            parts.append(f"{swatch(ODOMETRY_COLOR)}dead-reckoned odometry (the map's frame)")
+        if s.layers["grid"]:
+            parts.append("grid: 0.1 m cells, 1 m sections (scale bar: 1 m)")
+        parts.append(f"{swatch((15, 15, 15))}robot")
+        if self.pinned is not None:
+            parts.append(
+                f"{swatch(PINNED_COLOR)}pinned {self.pinned.mode.value} map ({s.pin_display})"
+            )
+        return '<div class="cogmap-note" id="cogmap-legend">' + "<br>".join(parts) + "</div>"
+
+    # ================================================================== camera
+    def content_extent(self) -> tuple[float, float, float, float] | None:
+        """What the view shows (maps with their shifts, and the pinned map beside)."""
+        offsets = self.offsets()
+        shown = self.state.shown
+        box = self.app.streamer.extent(shown, [offsets[m.value] for m in shown])
+        if self.pinned is not None and self.pinned.snapshot.poses.shape[0]:
+            p = self.pinned.snapshot.poses
+            x = offsets.get("pinned", 0.0)
+            pbox = (
+                float(p[:, 0].min()) + x,
+                float(p[:, 0].max()) + x,
+                float(p[:, 1].min()),
+                float(p[:, 1].max()),
+            )
+            box = pbox if box is None else _union(box, pbox)
+        return box
+
+    def frame_camera(self, top: bool = True) -> None:
+        """Point the camera at what the view shows, left of the control panel."""
+        extent = self.content_extent() or (-0.5, 3.5, -0.5, 2.5)
+        camera = self.client.camera
+        width = camera.image_width or 1280
+        height = camera.image_height or 800
+        fov = camera.fov if camera.fov > 0 else math.radians(50.0)
+        usable = max(0.35, 1.0 - PANEL_PX / width)
+        x0, x1, y0, y1 = extent
+        w, h = max(x1 - x0, 0.5) * 1.12, max(y1 - y0, 0.5) * 1.12
+        tan = math.tan(fov / 2.0)
+        distance = max(h / (2.0 * tan), w / (2.0 * tan * (width / height) * usable))
+        visible_w = 2.0 * distance * tan * (width / height)
+        cx = (x0 + x1) / 2 + (PANEL_PX / 2.0 / width) * visible_w * (1.0 if usable > 0.35 else 0)
+        cy = (y0 + y1) / 2
+        if top:
+            position = (cx, cy - 0.02 * distance, distance)
+        else:
+            position = (cx + 0.35 * distance, cy - 0.75 * distance, 0.65 * distance)
+        self._camera_set_at = time.monotonic()
+        self._camera_expected = np.array(position)
+        self._camera_acknowledged = False
+        self._framed = extent
+        with self.client.atomic():
+            camera.up_direction = (0.0, 0.0, 1.0)
+            camera.position = position
+            camera.look_at = (cx, cy, 0.0)
+
+    def follow(self) -> None:
+        """Re-frame when the map grew out of the framed box or shrank to a fraction of it."""
+        if not self.state.follow:
+            return
+        extent = self.content_extent()
+        framed = self._framed
+        if extent is None:
+            return
+        if framed is not None:
+            grew = (
+                extent[0] < framed[0] - 0.05
+                or extent[1] > framed[1] + 0.05
+                or extent[2] < framed[2] - 0.05
+                or extent[3] > framed[3] + 0.05
+            )
+            area = (extent[1] - extent[0]) * (extent[3] - extent[2])
+            framed_area = (framed[1] - framed[0]) * (framed[3] - framed[2])
+            if not grew and area >= 0.4 * framed_area:
+                return
+        self.frame_camera(top=True)
+
+    def _on_camera(self, camera: viser.CameraHandle) -> None:
+        """A camera report: the viewer moved the camera (not the view): stop following the map.
+
+        Reports before the browser shows the pose the view set are its way there; after it,
+        a different pose is the viewer's doing.
+        """
+        expected = self._camera_expected
+        if expected is None or not self.state.follow:
+            return
+        position = np.asarray(camera.position, dtype=float)
+        close = bool(
+            np.allclose(position, expected, rtol=1e-3, atol=1e-3 * (1 + np.abs(expected).max()))
+        )
+        if not self._camera_acknowledged:
+            self._camera_acknowledged = close
+            return
+        if close:
+            return
+        self.state.follow = False
+        self._setting = True
+        try:
+            self.follow_checkbox.value = False
+        finally:
+            self._setting = False
+
+    # ================================================================== per-update content
+    def refresh(self) -> None:
+        """What follows the maps: cluster log, comparison, camera (the app rate-limits it)."""
+        if self.closed:
+            return
+        app = self.app
+        with app.replay.lock:
+            cmap = app.replay.session.maps[self.state.mode]
+            key = (id(cmap), len(cmap.optimizations), len(cmap.clusters), cmap.num_loop_edges,
+                   len(app.replay.rebuilds))  # fmt: skip
+            if key != self._log_key:
+                self._log_key = key
+                self.log_html.content = app.cluster_log_html(self.state.mode, cmap)
+            if self.pinned is not None:
+                ckey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
+                        app.stats_version, self.state.mode)  # fmt: skip
+                if ckey != self._compare_key:
+                    self._compare_key = ckey
+                    self.compare_html.content = self._compare_table(cmap)
+        self.follow()
+
+    # ================================================================== inspect
+    def _on_click(self, event: Any) -> None:
+        origin = np.asarray(event.ray_origin, dtype=float)
+        direction = np.asarray(event.ray_direction, dtype=float)
+        if abs(direction[2]) < 1e-9:
+            return
+        t = -origin[2] / direction[2]
+        if t <= 0:
+            return
+        point = origin + t * direction
+        camera = self.client.camera
+        height = camera.image_height or 800
+        fov = camera.fov if camera.fov > 0 else math.radians(50.0)
+        per_pixel = 2.0 * t * float(np.linalg.norm(direction)) * math.tan(fov / 2.0) / height
+        self.select(self.app.pick(self, point[:2], PICK_PX * per_pixel))
+
+    def select(self, pick: Pick | None) -> None:
+        """Show ``pick`` (None: clear the selection)."""
+        with self.app.replay.lock, self.app.scene_lock, self._lock:
+            for node in self._selection:
+                node.remove()
+            self._selection = []
+            self.pick = pick
+            if pick is None:
+                self.inspect_html.content = (
+                    '<div class="cogmap-note" id="cogmap-inspect">Click a vertex or an edge of '
+                    "the map to see what it is.</div>"
+                )
+                return
+            self.inspect_html.content = pick.html
+            name = f"/map/{pick.mode.value}/selection"
+            seg = np.zeros((1, 2, 3), dtype=np.float32)
+            seg[0, :, :2] = pick.segment
+            seg[0, :, 2] = 0.012
+            scene = self.client.scene
+            if pick.kind == "edge":
+                self._selection.append(
+                    scene.add_line_segments(
+                        name, seg, colors=SELECTION_COLOR, thickness=9.0, thickness_units="screen"
+                    )
+                )
+            else:
+                self._selection.append(
+                    scene.add_point_cloud(
+                        name,
+                        seg[0, :1],
+                        colors=SELECTION_COLOR,
+                        point_size=0.035,
+                        point_shape="circle",
+                    )
+                )
+
+    # ================================================================== pin and compare
+    def pin(self) -> None:
+        """Keep a copy of the shown map to compare with."""
+        app = self.app
+        mode = self.state.mode
+        with app.replay.lock:
+            cmap = app.replay.session.maps[mode]
+            snapshot = cmap.snapshot()
+            params = app.replay.params
+            stats = app.map_figures(mode, cmap)
+            frames = app.replay.cursor
+            data_time = app.replay.frame_time
+        bag = app.replay.bag_path.name if app.replay.bag_path else "–"
+        self.unpin(quiet=True)
+        with app.replay.lock, app.scene_lock, self._lock:
+            self.pinned = PinnedMap(mode, params, snapshot, stats, frames, data_time, bag)
+            self._send_pinned()
+        self.apply(reframe=self.state.follow)
+
+    def unpin(self, quiet: bool = False) -> None:
+        """Drop the pinned map."""
+        with self.app.replay.lock, self.app.scene_lock, self._lock:
+            for node in self._pinned_nodes:
+                node.remove()
+            self._pinned_nodes = []
+            if self._pinned_frame is not None:
+                self._pinned_frame.remove()
+                self._pinned_frame = None
+            self.pinned = None
+            self.compare_html.content = (
+                '<div class="cogmap-note" id="cogmap-compare">Pin the shown map, change the '
+                "parameters, and compare the two here and in the scene.</div>"
+            )
+        if not quiet:
+            self.apply()
+
+    def _send_pinned(self) -> None:
+        assert self.pinned is not None
+        snap = self.pinned.snapshot
+        scene = self.client.scene
+        self._pinned_frame = scene.add_frame("/pinned", show_axes=False)
+        n = snap.vertex_ids.shape[0]
+        points = np.zeros((n, 3), dtype=np.float32)
+        points[:, :2] = snap.poses[:, :2]
+        if n:
+            self._pinned_nodes.append(
+                scene.add_point_cloud(
+                    "/pinned/vertices",
+                    points,
+                    colors=PINNED_COLOR,
+                    point_size=0.025,
+                    point_shape="circle",
+                    point_shading="flat",
+                )
+            )
+        m = snap.edge_from.shape[0]
+        if m:
+            seg = np.zeros((m, 2, 3), dtype=np.float32)
+            seg[:, 0, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
+            seg[:, 1, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
+            loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
+            colors = np.where(loop[:, None], (110, 60, 170), (185, 170, 215)).astype(np.uint8)
+            self._pinned_nodes.append(
+                scene.add_line_segments(
+                    "/pinned/edges",
+                    seg,
+                    colors=np.repeat(colors[:, None, :], 2, axis=1),
+                    thickness=2.0,
+                    thickness_units="screen",
+                )
+            )
+
+    def _compare_table(self, cmap: CognitiveMap) -> str:
+        pinned = self.pinned
+        assert pinned is not None
+        app = self.app
+        live_params = app.replay.params
+        live = app.map_figures(self.state.mode, cmap)
+        rows = []
+        for spec in ALL_SLIDERS:
+            a = getattr(live_params, spec.name)
+            b = getattr(pinned.params, spec.name)
+            cls = ' class="cogmap-diff"' if a != b else ""
+            rows.append(
+                f"<tr><td>{html.escape(spec.label)}</td><td{cls}>{format_value(a)}</td>"
+                f"<td{cls}>{format_value(b)}</td></tr>"
+            )
+        rows.append('<tr class="cogmap-section"><td colspan="3">figures</td></tr>')
+        for key, label in (
+            ("vertices", "vertices"),
+            ("edges", "edges"),
+            ("loops", "loop-closure edges"),
+            ("ate", "ATE (m)"),
+            ("completeness", "completeness (8 cm)"),
+            ("correctness", "correctness (8 cm)"),
+        ):
+            rows.append(
+                f'<tr><td>{label}</td><td id="cogmap-compare-live-{key}">{live[key]}</td>'
+                f'<td id="cogmap-compare-pinned-{key}">{pinned.stats[key]}</td></tr>'
+            )
+        t = pinned.data_time
+        when = "–" if math.isnan(t) else f"{t:.0f} s"
+        return (
+            '<table class="cogmap-table" id="cogmap-compare">'
+            f"<thead><tr><th></th><th>live {self.state.mode.value}</th>"
+            f"<th>pinned {pinned.mode.value}</th></tr></thead><tbody>"
+            + "".join(rows)
+            + "</tbody></table>"
+            f'<div class="cogmap-note">pinned at {when} of {html.escape(pinned.bag)} '
+            f"({pinned.frames} frames); differing parameters in bold</div>"
+        )
+
+    def close(self) -> None:
+        """The tab went away."""
+        self.closed = True
+
+
+def _union(
+    a: tuple[float, float, float, float], b: tuple[float, float, float, float]
+) -> tuple[float, float, float, float]:
+    return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+
+
+def _extent_width(snap: MapSnapshot) -> float:
+    if snap.poses.shape[0] == 0:
+        return 1.0
+    return float(snap.poses[:, 0].max() - snap.poses[:, 0].min())
+
+
+def describe_vertex(cmap: CognitiveMap, snap: MapSnapshot, index: int) -> str:
+    """What the page says about vertex ``index`` of ``snap``."""
+    vid = int(snap.vertex_ids[index])
+    x, y, theta = snap.poses[index]
+    graph = cmap.graph
+    degree = len(graph.adjacency[vid]) if vid < len(graph.adjacency) else 0
+    loops = int(
+        np.count_nonzero(
+            (snap.edge_kind == EdgeKind.LOOP_CLOSURE)
+            & ((snap.edge_from == vid) | (snap.edge_to == vid))
+        )
+    )
+    rows = [
+        ("map", cmap.mode.value),
+        ("vertex id", str(vid)),
+        ("created at", f"{snap.vertex_time[index]:.2f} s"),
+        ("pose", f"x {x:.3f} m, y {y:.3f} m, θ {math.degrees(theta):.1f}°"),
+        ("view template", f"#{int(snap.vertex_view[index])}"),
+        ("edges", f"{degree} ({loops} loop closure{'s' if loops != 1 else ''})"),
+    ]
+    return _info_table("vertex", rows)
+
+
+def describe_edge(
+    cmap: CognitiveMap, snap: MapSnapshot, index: int, false_times: NDArray[np.float64]
+) -> str:
+    """What the page says about edge ``index`` of ``snap`` (with its residual)."""
+    kind = "loop closure" if snap.edge_kind[index] == EdgeKind.LOOP_CLOSURE else "sequential"
+    dx, dy, dtheta = snap.edge_rel[index]
+    errors = edge_errors(cmap)
+    residual = float(errors[index]) if index < errors.shape[0] else math.nan
+    rows = [
+        ("map", cmap.mode.value),
+        ("edge", f"{int(snap.edge_from[index])} → {int(snap.edge_to[index])} ({kind})"),
+        ("created at", f"{snap.edge_time[index]:.2f} s"),
+        ("measured", f"{math.hypot(dx, dy):.3f} m, turn {math.degrees(dtheta):.1f}°"),
+        ("residual", f"{residual:.2f} σ (whitened ‖S r‖ at the current poses)"),
+    ]
+    if kind == "loop closure":
+        cid = int(snap.edge_cluster[index])
+        rows.insert(3, ("cluster", f"{swatch(cluster_color(cid))}{cid}"))
+        false = bool(np.isin(snap.edge_time[index], false_times))
+        rows.append(("ground truth", "<b>false loop closure</b>" if false else "true loop closure"))
+    return _info_table("edge", rows)
+
+
+def _info_table(kind: str, rows: list[tuple[str, str]]) -> str:
+    body = "".join(f"<tr><td>{k}</td><td>{v}</td></tr>" for k, v in rows)
+    return (
+        f'<table class="cogmap-table" id="cogmap-inspect" data-kind="{kind}">'
+        f"<tbody>{body}</tbody></table>"
+    )
+
+
+def nearest_pick(
+    cmap: CognitiveMap,
+    mode: MapMode,
+    point: NDArray[np.float64],
+    tolerance: float,
+    false_times: NDArray[np.float64],
+    vertex_radius: float = 0.0,
+) -> tuple[float, Pick] | None:
+    """The vertex or edge of ``cmap`` nearest to ``point`` within ``tolerance``.
+
+    An edge counts only away from its ends (by ``vertex_radius``, the drawn dot, at most a
+    quarter of its length): a click on a vertex's dot selects the vertex, a click along an
+    edge between two vertices the edge. Ties go to the vertex.
+    """
+    snap = cmap.snapshot()
+    if snap.vertex_ids.shape[0] == 0:
+        return None
+    d = np.hypot(snap.poses[:, 0] - point[0], snap.poses[:, 1] - point[1])
+    k = int(np.argmin(d))
+    gap_e, e = math.inf, -1
+    if snap.edge_from.shape[0]:
+        a = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
+        b = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
+        ab = b - a
+        length = np.hypot(ab[:, 0], ab[:, 1])
+        denom = np.where(length > 0, length * length, 1.0)
+        t = np.clip(np.einsum("ij,ij->i", point - a, ab) / denom, 0, 1)
+        gap = np.hypot(*(point - (a + ab * t[:, None])).T)
+        zone = np.minimum(0.25 * length, vertex_radius)
+        gap[np.minimum(t, 1 - t) * length < zone] = np.inf  # at an end: that vertex's
+        e = int(np.argmin(gap))
+        gap_e = float(gap[e])
+    if gap_e <= tolerance and gap_e < d[k]:
+        seg = np.array([a[e], b[e]])
+        return gap_e, Pick(mode, "edge", e, describe_edge(cmap, snap, e, false_times), seg)
+    if d[k] <= tolerance:
+        seg = np.array([snap.poses[k, :2], snap.poses[k, :2]])
+        return float(d[k]), Pick(mode, "vertex", k, describe_vertex(cmap, snap, k), seg)
+    return None
