@@ -1,6 +1,15 @@
-"""Make ``docs/web-app.png``: the page after a full replay of the default dataset (compact map).
+"""Make the screenshots of ``docs/web-app.md``: the page in its final states on the default dataset.
 
-    python docs/make_screenshot.py [BAG] [--out docs/web-app.png]
+    python docs/make_screenshot.py [BAG] [--out-dir docs]
+
+Replays the bag to its end at full speed, opens the page in Chromium and saves:
+
+- ``web-app.png``: the compact map over the aligned ground truth (the default view);
+- ``web-app-side-by-side.png``: the standard map with the compact map beside it;
+- ``web-app-pinned.png``: the compact map at the paper's values pinned under the live compact
+  map at δ = 16 (the sweep's best setting), with the two parameter sets compared in the panel;
+- ``web-app-error.png``: the standard map's edges coloured by their residual (whitened, at the
+  map's poses) over the metric grid.
 
 Needs Chromium at /usr/bin/chromium and playwright (``pip install -e '.[test]'``).
 """
@@ -14,6 +23,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -21,42 +31,98 @@ import viser  # noqa: E402
 
 from app.cli_common import resolve_bag  # noqa: E402
 from app.server.app import CogmapApp  # noqa: E402
+from app.server.view import ClientView  # noqa: E402
+from cogmap_core.cognitive_map import MapMode  # noqa: E402
+from tests.test_browser import choose, close_notices, control  # noqa: E402
 from tests.test_server_support import CHROMIUM_ARGS  # noqa: E402
+
+SETTLE_S = 3.0  # for the browser to draw what the server sent
+
+
+def _wait(condition: Any, what: str, timeout: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise SystemExit(f"timed out waiting for {what}")
+        time.sleep(0.1)
 
 
 def main() -> int:
-    """Replay, open the page, save the screenshot."""
+    """Replay, open the page, save the screenshots."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("bag", nargs="?", default=None, help="bag (default: built-in dataset)")
-    parser.add_argument("--out", default=str(Path(__file__).parent / "web-app.png"))
+    parser.add_argument("--out-dir", default=str(Path(__file__).parent))
     parser.add_argument("--width", type=int, default=1600)
     parser.add_argument("--height", type=int, default=1000)
     args = parser.parse_args()
     from playwright.sync_api import sync_playwright
 
+    out = Path(args.out_dir)
     bag = resolve_bag(args.bag)  # default: the built-in dataset
     with contextlib.redirect_stdout(io.StringIO()):
         server = viser.ViserServer(host="127.0.0.1", port=8093, verbose=False)
     app = CogmapApp(server, bag, speed=math.inf)
     app.start()
-    if not app.replay.wait_idle(3600):
+    if not app.wait_idle(3600):
         raise SystemExit("the replay did not finish")
     print(f"replayed {app.replay.cursor} frames: {app.replay.state.value} {app.replay.message}")
+    written: list[Path] = []
+
+    def shot(page: Any, name: str) -> None:
+        _wait(lambda: app.wait_idle(60), "the page to catch up")
+        time.sleep(SETTLE_S)
+        path = out / name
+        page.screenshot(path=str(path))
+        written.append(path)
+
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
         page = browser.new_page(viewport={"width": args.width, "height": args.height})
         page.goto(f"http://127.0.0.1:{server.get_port()}")
         page.locator("#cogmap-compact-vertices").wait_for(timeout=30_000)
-        time.sleep(3.0)
-        # close viser's "software WebGL" notice, which would cover the map
-        for button in page.locator(".mantine-Notification-closeButton").all():
-            button.click()
+        _wait(lambda: len(app.views) == 1, "the tab's view")
+        view: ClientView = next(iter(app.views.values()))
         time.sleep(1.0)
-        page.screenshot(path=args.out)
+        close_notices(page)
+        shot(page, "web-app.png")
+
+        choose(page, "map", "standard")
+        control(page, "side by side").click()
+        choose(page, "compare with", "compact")
+        _wait(lambda: view.state.shown == (MapMode.STANDARD, MapMode.COMPACT), "side by side")
+        shot(page, "web-app-side-by-side.png")
+
+        control(page, "side by side").click()
+        choose(page, "colour edges by", "error (residual)")
+        _wait(lambda: view.state.shown == (MapMode.STANDARD,), "the standard map alone")
+        shot(page, "web-app-error.png")
+        choose(page, "colour edges by", "loop closures by cluster")
+
+        choose(page, "map", "compact")
+        _wait(lambda: view.state.shown == (MapMode.COMPACT,), "the compact map")
+        page.get_by_role("button", name="pin the shown map").click()
+        _wait(lambda: view.pinned is not None, "the pin")
+        choose(page, "pinned map", "under")
+        delta = control(page, "δ =")
+        delta.click()
+        delta.fill("16")
+        delta.press("Enter")
+        _wait(lambda: app.replay.params.delta == 16.0, "δ = 16")
+        _wait(lambda: app.wait_idle(60), "the rebuild")
+        live = page.locator("#cogmap-compare-live-vertices")
+        _wait(lambda: live.count() == 1 and live.inner_text() != "", "the comparison")
+        for _ in range(20):  # the panel's HTML is replaced as figures arrive: try again
+            try:
+                live.scroll_into_view_if_needed(timeout=2_000)
+                break
+            except Exception:
+                time.sleep(0.5)
+        shot(page, "web-app-pinned.png")
         browser.close()
     app.stop()
     server.stop()
-    print(f"wrote {args.out}")
+    for path in written:
+        print(f"wrote {path}")
     return 0
 
 

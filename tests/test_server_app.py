@@ -193,22 +193,7 @@ def _client(port: int) -> ClientConnection:
 
 def _say_hello(ws: ClientConnection) -> None:
     """What a browser sends first (its camera); viser then treats it as a client."""
-    ws.send(
-        msgspec.msgpack.encode(
-            {
-                "type": "ViewerCameraMessage",
-                "wxyz": (1.0, 0.0, 0.0, 0.0),
-                "position": (0.0, 0.0, 5.0),
-                "fov": 1.0,
-                "near": 0.01,
-                "far": 100.0,
-                "image_height": 600,
-                "image_width": 800,
-                "look_at": (0.0, 0.0, 0.0),
-                "up_direction": (0.0, 0.0, 1.0),
-            }
-        )
-    )
+    ws.send(support.camera_message())
 
 
 def test_a_client_sending_out_of_range_values_over_the_websocket(short_bag: Path) -> None:

@@ -28,7 +28,7 @@ from cogmap_core.config import MapParams
 from cogmap_core.evaluation import align_rigid_2d
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
-from tests.test_server_support import assert_same_map, counter, running_app
+from tests.test_server_support import assert_same_map, camera_message, counter, running_app
 
 short_bag = support.short_bag
 reference = support.reference
@@ -54,19 +54,7 @@ def hello(port: int) -> object:
         max_size=None,
         open_timeout=10,
     )
-    camera = {
-        "type": "ViewerCameraMessage",
-        "wxyz": (1.0, 0.0, 0.0, 0.0),
-        "position": (0.0, 0.0, 5.0),
-        "fov": 1.0,
-        "near": 0.01,
-        "far": 100.0,
-        "image_height": 800,
-        "image_width": 1280,
-        "look_at": (0.0, 0.0, 0.0),
-        "up_direction": (0.0, 0.0, 1.0),
-    }
-    ws.send(msgspec.msgpack.encode(camera))
+    ws.send(camera_message(1280, 800))
     return ws
 
 

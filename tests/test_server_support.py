@@ -97,3 +97,23 @@ CHROMIUM_ARGS = [
     "--use-angle=swiftshader",
     "--enable-unsafe-swiftshader",
 ]
+
+
+def camera_message(width: int = 800, height: int = 600) -> bytes:
+    """What a browser sends first (its camera); viser then treats the connection as a client."""
+    import msgspec
+
+    return msgspec.msgpack.encode(
+        {
+            "type": "ViewerCameraMessage",
+            "wxyz": (1.0, 0.0, 0.0, 0.0),
+            "position": (0.0, 0.0, 5.0),
+            "fov": 1.0,
+            "near": 0.01,
+            "far": 100.0,
+            "image_height": height,
+            "image_width": width,
+            "look_at": (0.0, 0.0, 0.0),
+            "up_direction": (0.0, 0.0, 1.0),
+        }
+    )
