@@ -12,6 +12,8 @@ from __future__ import annotations
 import base64
 import html
 import logging
+import sys
+import sysconfig
 import urllib.parse
 from functools import cache
 from pathlib import Path
@@ -21,12 +23,26 @@ from app.server.export import find_static_dir
 log = logging.getLogger(__name__)
 
 TITLE = "cogmap · compact cognitive map"
+#: Where ``pip install .`` puts ``static/``'s files (``[tool.setuptools.data-files]``).
+INSTALLED_ASSETS = Path("share") / "cogmap" / "static"
+
+
+def find_asset_dir() -> Path:
+    """The assets: ``static/`` of the source tree, else the installed copy, else ``./static``."""
+    source = find_static_dir()
+    if (source / "cogmap.js").is_file():
+        return source
+    for prefix in (sysconfig.get_path("data"), sys.prefix):
+        installed = Path(prefix) / INSTALLED_ASSETS
+        if (installed / "cogmap.js").is_file():
+            return installed
+    return source
 
 
 @cache
 def read_asset(name: str, static_dir: Path | None = None) -> str:
     """The text of ``static/<name>`` ("" when it is missing)."""
-    base = static_dir if static_dir is not None else find_static_dir()
+    base = static_dir if static_dir is not None else find_asset_dir()
     path = base / name
     try:
         return path.read_text(encoding="utf-8")
