@@ -90,20 +90,27 @@ class Built:
 
 
 def build_map(
-    log: EventLog, task: BuildTask, interrupted: Interrupted | None = None
+    log: EventLog,
+    task: BuildTask,
+    interrupted: Interrupted | None = None,
+    events: Sequence[MapEvent] | None = None,
 ) -> CognitiveMap:
     """What ``SlamSession.rebuild`` does for one map, abandoned when ``interrupted()`` says so.
+
+    ``events``: the log's events already made into objects (at least those the task uses), to
+    skip making them again from the log's columns.
 
     Raises:
         Abandoned: ``interrupted()`` returned True between two chunks of events.
 
     """
-    end = log.frame_end[task.frames - 1] if task.frames else 0
+    end = int(log.frame_end[task.frames - 1]) if task.frames else 0
+    source = log.events if events is None else events
     cmap = CognitiveMap(task.mode, task.params)
     for lo in range(0, end, REBUILD_CHUNK):
         if interrupted is not None and interrupted():
             raise Abandoned
-        cmap.apply_all(log.events[lo : min(lo + REBUILD_CHUNK, end)])
+        cmap.apply_all(source[lo : min(lo + REBUILD_CHUNK, end)])
     if task.finish and task.frames:
         cmap.finish(log.frame_time[task.frames - 1])
     if interrupted is not None and interrupted():
@@ -294,6 +301,7 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
     While it builds, a ``("cancel",)`` message makes it drop the build (checked between chunks).
     """
     log = EventLog()
+    events: list[MapEvent] = []  # the log's events as objects, made once as they arrive
 
     def cancelled() -> bool:
         if conn.poll(0):
@@ -310,15 +318,16 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
         if kind == "stop":
             return
         if kind == "reset":
-            log = EventLog()
+            log, events = EventLog(), []
         elif kind == "append":
             _, columns, frame_end, frame_time = message
             log.extend(columns, frame_end, frame_time)
+            events.extend(log.events[len(events) :])
         elif kind == "build":
             _, task_id, task = message
             started = time.perf_counter()
             try:
-                cmap = build_map(log, task, cancelled)
+                cmap = build_map(log, task, cancelled, events)
             except Abandoned:
                 conn.send(("abandoned", task_id))
                 continue
