@@ -20,6 +20,10 @@ class ProgressBar:
 
     def __call__(self, done: int, total: int, data_time: float) -> None:
         """Report progress; redraws when enough time has passed or at the end."""
+        self.draw(done, total, f"{done}/{total} frames  t={data_time:7.1f} s")
+
+    def draw(self, done: int, total: int, text: str) -> None:
+        """Redraw the bar at ``done / total``, then ``text`` (throttled; always at the end)."""
         now = time.monotonic()
         if now - self._last < self.period and done < total:
             return
@@ -27,8 +31,7 @@ class ProgressBar:
         fraction = min(done / total, 1.0) if total > 0 else 0.0
         filled = int(30 * fraction)
         self.stream.write(
-            f"\r{self.label} [{'#' * filled}{'.' * (30 - filled)}] {fraction * 100:5.1f}% "
-            f"{done}/{total} frames  t={data_time:7.1f} s"
+            f"\r{self.label} [{'#' * filled}{'.' * (30 - filled)}] {fraction * 100:5.1f}% {text}"
         )
         self.stream.flush()
         self._drawn = True

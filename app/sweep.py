@@ -31,7 +31,6 @@ import logging
 import math
 import os
 import signal
-import sys
 import tempfile
 import threading
 import time
@@ -46,6 +45,7 @@ import cv2
 import numpy as np
 
 from app.plots import BLACK, FONT, Panel
+from app.progress import ProgressBar
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -825,46 +825,25 @@ def check_worker_paths(client: Any, paths: Sequence[str]) -> None:
 
 
 # --------------------------------------------------------------------------- progress
-class CellProgress:
+class CellProgress(ProgressBar):
     """``cogmap sweep [#####.....]  45.0% 90/200 cells  1 failed  34 s  ~41 s left`` on stderr."""
 
     def __init__(
         self, total: int, label: str = "cogmap sweep", stream: TextIO | None = None
     ) -> None:
         """A bar for ``total`` cells."""
+        super().__init__(label, stream)
         self.total = total
-        self.label = label
-        self.stream = stream or sys.stderr
         self.started = time.monotonic()
-        self._last = 0.0
-        self._drawn = False
 
     def update(self, done: int, failed: int) -> None:
         """Redraw (at most 8 times a second, and always at the end)."""
-        now = time.monotonic()
-        if now - self._last < 0.125 and done < self.total:
-            return
-        self._last = now
-        fraction = done / self.total if self.total else 1.0
-        filled = int(30 * fraction)
-        elapsed = now - self.started
+        elapsed = time.monotonic() - self.started
         left = ""
         if 0 < done < self.total:
             left = f"  ~{elapsed / done * (self.total - done):.0f} s left"
         failures = f"  {failed} failed" if failed else ""
-        self.stream.write(
-            f"\r{self.label} [{'#' * filled}{'.' * (30 - filled)}] {fraction * 100:5.1f}% "
-            f"{done}/{self.total} cells{failures}  {elapsed:.0f} s{left}  "
-        )
-        self.stream.flush()
-        self._drawn = True
-
-    def close(self) -> None:
-        """End the bar's line (once)."""
-        if self._drawn:
-            self.stream.write("\n")
-            self.stream.flush()
-            self._drawn = False
+        self.draw(done, self.total, f"{done}/{self.total} cells{failures}  {elapsed:.0f} s{left}  ")
 
 
 # --------------------------------------------------------------------------- the sweep

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cogmap_core.errors import InputFileError
 from cogmap_core.sources.odometry_log import (
     LOOP_COLUMNS,
     ODOMETRY_COLUMNS,
@@ -28,6 +27,7 @@ from cogmap_core.sources.odometry_log import (
     OdometryLog,
     Rows,
     make_odometry_log,
+    read_log_text,
 )
 
 
@@ -65,14 +65,7 @@ def read_rows(path: Path, rows: Rows, widths: tuple[int, ...]) -> Rows:
         LogFormatError: a row of another width, or a field that is not a number.
 
     """
-    if not path.is_file():
-        raise InputFileError(f"{path}: no such file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise LogFormatError(f"{path}: not a text file; expected CSV lines") from None
-    except OSError as exc:
-        raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
+    text = read_log_text(path, "CSV lines")
     expect = " or ".join(str(w) for w in widths)
     names = ",".join(rows.columns)
     first = True

@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from cogmap_core.errors import InputFileError
 from cogmap_core.sources.odometry_log import (
     LOOP_COLUMNS,
     ODOMETRY_COLUMNS,
@@ -27,6 +26,7 @@ from cogmap_core.sources.odometry_log import (
     OdometryLog,
     Rows,
     make_odometry_log,
+    read_log_text,
 )
 
 #: The first word of a line -> how many numbers follow it.
@@ -73,14 +73,7 @@ def _is_float(text: str) -> bool:
 
 
 def _lines(path: Path) -> list[tuple[int, list[str]]]:
-    if not path.is_file():
-        raise InputFileError(f"{path}: no such file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise LogFormatError(f"{path}: not a text file; expected TUC measurement lines") from None
-    except OSError as exc:
-        raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
+    text = read_log_text(path, "TUC measurement lines")
     out = []
     for line_no, line in enumerate(text.splitlines(), start=1):
         words = line.split()

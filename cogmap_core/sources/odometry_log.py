@@ -108,6 +108,24 @@ class LogFormatError(InputFileError):
     """A log file has a malformed line or values that break the log's rules (file:line named)."""
 
 
+def read_log_text(path: Path, expected: str) -> str:
+    """The text of a log file; ``expected`` says what its lines should be (for the messages).
+
+    Raises:
+        InputFileError: a missing or unreadable file.
+        LogFormatError: the file is not UTF-8 text.
+
+    """
+    if not path.is_file():
+        raise InputFileError(f"{path}: no such file")
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise LogFormatError(f"{path}: not a text file; expected {expected}") from None
+    except OSError as exc:
+        raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
+
+
 @dataclass(frozen=True)
 class LogSourceConfig:
     """How a log becomes events (defaults: the settings for every log, measured on TUC).
