@@ -123,7 +123,14 @@ def params_from_args(args: argparse.Namespace, base: MapParams | None = None) ->
 
 
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--format``, and the files of a log: ``--loops``, ``--ground-truth``."""
+    """``FILE`` (default: the built-in dataset), ``--format`` and a log's other files."""
+    parser.add_argument(
+        "bag",
+        nargs="?",
+        default=None,
+        metavar="FILE",
+        help="iRat-layout ROS bag, TUC input file or CSV odometry file",
+    )
     parser.add_argument(
         "--format",
         choices=("auto", *FORMATS),

@@ -81,13 +81,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "With --save-session FILE the SLAM state is saved at the end; cogmap run BAG2 --resume "
         "FILE continues it on another bag (sessions are for bags only).",
     )
-    parser.add_argument(
-        "bag",
-        nargs="?",
-        default=None,
-        metavar="FILE",
-        help="iRat-layout ROS bag, TUC input file or CSV odometry file",
-    )
     parser.add_argument("--out", required=True, metavar="DIR", help="report folder")
     parser.add_argument(
         "--force",

@@ -168,13 +168,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "no camera panel, the place-recognition score of each link instead).",
     )
     parser.add_argument(
-        "bag",
-        nargs="?",
-        default=None,
-        metavar="FILE",
-        help="iRat-layout ROS bag, TUC input file or CSV odometry file",
-    )
-    parser.add_argument(
         "--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)"
     )
     parser.add_argument(
