@@ -58,6 +58,7 @@ from cogmap_core.event_file import (
     load_event_file,
     save_event_file,
 )
+from cogmap_core.fileio import write_bytes_atomic
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.slam import EventLog, SlamSession
 from cogmap_core.sweep import (
@@ -109,30 +110,6 @@ class SweepError(CogmapError):
 
 
 # --------------------------------------------------------------------------- small file helpers
-def _write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file beside it and a rename."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(tmp, 0o666 & ~_UMASK)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _umask()
-
-
 def _json_clean(value: Any) -> Any:
     """NaN and infinities become ``None`` (strict JSON)."""
     if isinstance(value, float) and not math.isfinite(value):
@@ -147,7 +124,7 @@ def _json_clean(value: Any) -> Any:
 def write_json(path: Path, payload: Mapping[str, Any]) -> None:
     """Write strict JSON atomically."""
     text = json.dumps(_json_clean(dict(payload)), indent=2, allow_nan=False) + "\n"
-    _write_atomic(path, text.encode())
+    write_bytes_atomic(path, text.encode())
 
 
 # --------------------------------------------------------------------------- events per bag
@@ -290,7 +267,7 @@ def prepare_events(
                 if source.is_event_file:
                     raise
             else:
-                _write_atomic(target, shared.read_bytes())
+                write_bytes_atomic(target, shared.read_bytes())
                 origin = "cache" if not source.is_event_file else "event file"
     if recording is None:
         if say is not None:
@@ -305,7 +282,7 @@ def prepare_events(
         save_event_file(target, recording)
         with contextlib.suppress(OSError):  # the cache is a convenience
             shared_events_dir().mkdir(parents=True, exist_ok=True)
-            _write_atomic(shared_events_dir() / source.events_name, target.read_bytes())
+            write_bytes_atomic(shared_events_dir() / source.events_name, target.read_bytes())
         origin = "front end"
     if recording.ground_truth is None:
         raise SweepError(
@@ -443,17 +420,17 @@ class ResultsTable:
         self.path = path
         self.rows: list[dict[str, Any]] = []
         if not path.exists():
-            _write_atomic(path, (",".join(RESULT_COLUMNS) + "\n").encode())
+            write_bytes_atomic(path, (",".join(RESULT_COLUMNS) + "\n").encode())
             return
         with path.open(newline="") as handle:
             text = handle.read()
         if text and not text.endswith("\n"):
             text = text[: text.rfind("\n") + 1]  # the last line was cut short by a kill
-            _write_atomic(path, text.encode())
+            write_bytes_atomic(path, text.encode())
         reader = csv.reader(io.StringIO(text, newline=""))
         header = next(reader, None)
         if header is None:
-            _write_atomic(path, (",".join(RESULT_COLUMNS) + "\n").encode())
+            write_bytes_atomic(path, (",".join(RESULT_COLUMNS) + "\n").encode())
             return
         if tuple(header) != RESULT_COLUMNS:
             raise SweepError(
@@ -1131,7 +1108,7 @@ class Sweep:
         ok, png = cv2.imencode(".png", image)
         if not ok:  # pragma: no cover - OpenCV always encodes a uint8 image
             raise SweepError("could not encode pareto.png")
-        _write_atomic(self.out_dir / PARETO_FILE, png.tobytes())
+        write_bytes_atomic(self.out_dir / PARETO_FILE, png.tobytes())
         self.files.append(self.out_dir / PARETO_FILE)
         result = SweepResult(
             self.out_dir, len(self.cells), computed, skipped, len(failed), best, list(self.files)

@@ -22,8 +22,6 @@ Files are written to a temporary name beside the target and renamed when complet
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -35,6 +33,7 @@ from numpy.typing import NDArray
 
 from cogmap_core.errors import InputFileError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
+from cogmap_core.fileio import atomic_writer
 
 FORMAT_NAME = "cogmap-events"
 FORMAT_VERSION = 1
@@ -145,24 +144,9 @@ def save_event_file(path: Path | str, recording: EventRecording) -> Path:
         arrays["ground_truth"] = np.asarray(recording.ground_truth, dtype=np.float64)
     arrays["header"] = np.array(json.dumps(header, sort_keys=True))
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez_compressed(handle, **arrays)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.chmod(tmp_name, 0o666 & ~_umask())
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
+    with atomic_writer(path, binary=True) as handle:
+        np.savez_compressed(handle, **arrays)
     return path
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def load_event_file(path: Path | str) -> EventRecording:

@@ -33,8 +33,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import zipfile
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
@@ -50,6 +48,7 @@ from cogmap_core.clustering import Cluster, LoopClosureClusterer
 from cogmap_core.cognitive_map import CognitiveMap, MapCounters, MapMode, OptimizationRecord
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.fileio import atomic_writer
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.frontend.local_view import MatchResult, ViewMatch
 from cogmap_core.frontend.pose_cells import _ViewCell
@@ -133,19 +132,8 @@ def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> P
     arrays["header"] = np.array(json.dumps(header, sort_keys=True))
     if not path.parent.is_dir():
         raise SessionError(f"{path}: folder {path.parent} does not exist; create it first")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez_compressed(handle, **arrays)
-            handle.flush()
-            os.fsync(handle.fileno())
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp_name, 0o666 & ~mask)
-        os.replace(tmp_name, path)
-    except BaseException:
-        Path(tmp_name).unlink(missing_ok=True)
-        raise
+    with atomic_writer(path, binary=True) as handle:
+        np.savez_compressed(handle, **arrays)
     return path
 
 
