@@ -21,7 +21,6 @@ from app.server.rebuild import (
     BuildTask,
     MapCache,
     ProcessBuilder,
-    ScheduleIndex,
     ThreadBuilder,
     cluster_schedule,
     same_schedule,
@@ -89,13 +88,12 @@ def test_cluster_schedule_is_the_clusterers(reference: SlamSession) -> None:
 
 def test_same_schedule_means_the_same_map(reference: SlamSession) -> None:
     log = reference.log
-    index = ScheduleIndex()
     frames = log.frames
     paper = MapParams()
     same, different = [], []
     for t_total in (1.0, 3.0, 10.0, 50.0, 400.0):
         new = paper.with_changes(t_total=t_total)
-        (same if same_schedule(index, log, frames, True, paper, new) else different).append(new)
+        (same if same_schedule(log, frames, True, paper, new) else different).append(new)
     assert same and different  # both cases occur on this bag
     for new in same:
         rebuilt = reference.rebuild(new)
@@ -110,8 +108,8 @@ def test_same_schedule_means_the_same_map(reference: SlamSession) -> None:
             reference.maps[MapMode.STANDARD].snapshot().poses,
         )
     # any other parameter: never "the same schedule"
-    assert not same_schedule(index, log, frames, True, paper, paper.with_changes(delta=5.0))
-    assert same_schedule(index, log, frames, True, paper, paper)
+    assert not same_schedule(log, frames, True, paper, paper.with_changes(delta=5.0))
+    assert same_schedule(log, frames, True, paper, paper)
 
 
 def test_worker_processes_build_exactly_the_sessions_maps(reference: SlamSession) -> None:
@@ -201,13 +199,12 @@ def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
         assert record.how == {m: "cached" for m in MapMode}
         for mode in MapMode:
             assert_same_map(app.replay.session.maps[mode], reference.maps[mode])
-        # a T_total that gives the same cluster schedule keeps every map
-        index = ScheduleIndex()
-        log = app.replay.session.log
+            # a T_total that gives the same cluster schedule keeps every map
+            log = app.replay.session.log
         kept = next(
             t
             for t in (400.0, 300.0, 200.0, 150.0)
-            if same_schedule(index, log, log.frames, True, MapParams(), MapParams(t_total=t))
+            if same_schedule(log, log.frames, True, MapParams(), MapParams(t_total=t))
         )
         before = dict(app.replay.session.maps.maps)
         app.param_sliders["t_total"].value = kept

@@ -183,17 +183,7 @@ def _first_past(
     return lo
 
 
-class ScheduleIndex:
-    """Event times and link positions of a log (read from its columns, no copy kept)."""
-
-    def arrays(self, log: EventLog) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-        """``times`` of every event of ``log`` and the indices of its links."""
-        columns = log.columns()
-        return columns["time"], np.flatnonzero(columns["kind"] == KIND_LINK)
-
-
 def same_schedule(
-    index: ScheduleIndex,
     log: EventLog,
     frames: int,
     finish: bool,
@@ -208,8 +198,9 @@ def same_schedule(
     changed = {k for k, v in old.to_dict().items() if getattr(new, k) != v}
     if not changed or not changed <= SCHEDULE_PARAMS:
         return not changed
-    times, links = index.arrays(log)
-    end = log.frame_end[frames - 1] if frames else 0
+    end = int(log.frame_end[frames - 1]) if frames else 0
+    columns = log.columns(end)
+    times, links = columns["time"], np.flatnonzero(columns["kind"] == KIND_LINK)
     return cluster_schedule(times, links, end, finish, old.t_interval, old.t_total) == (
         cluster_schedule(times, links, end, finish, new.t_interval, new.t_total)
     )
@@ -595,7 +586,6 @@ __all__ = [
     "MapCache",
     "MapEvent",
     "ProcessBuilder",
-    "ScheduleIndex",
     "ThreadBuilder",
     "build_map",
     "cluster_schedule",

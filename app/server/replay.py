@@ -40,7 +40,6 @@ from app.server.rebuild import (
     Builder,
     BuildTask,
     MapCache,
-    ScheduleIndex,
     ThreadBuilder,
     same_schedule,
 )
@@ -268,7 +267,6 @@ class Replay:
         self._busy = 0  # 1 while the worker handles a request or a frame
         self.builder: Builder = builder or ThreadBuilder()
         self.cache = MapCache(uses=PARAMS_USED)
-        self._schedule = ScheduleIndex()
         self._log_id = 0  # bumped with every new session (the cache's maps belong to one)
 
     # ================================================================== requests (any thread)
@@ -804,7 +802,7 @@ class Replay:
             started = time.perf_counter()
             current = self.session.maps[mode]
             if not needs_rebuild(mode, current.params, params) or same_schedule(
-                self._schedule, log, frames, finish, current.params, params
+                log, frames, finish, current.params, params
             ):
                 cmap: CognitiveMap | None = current  # the change leaves this map as it is
                 with self.lock:
