@@ -316,7 +316,7 @@ class CognitiveMap:
 
     def to_pose_graph(self) -> PoseGraph:
         """The live map as the pose graph its optimisation uses (first live vertex fixed)."""
-        return self.graph.to_pose_graph(self.params.edge_noise_model >= 0.5)
+        return self.graph.to_pose_graph(self.params.link_sigmas())
 
     def size_history(self) -> tuple[FloatArray, IntArray, IntArray]:
         """(time, vertices, edges) after every event that changed the map's size."""
@@ -480,7 +480,7 @@ class CognitiveMap:
             return None  # no edge added since the last optimisation: it would change nothing
         self._edges_at_last_optimization = graph.num_edges_total
         self._optimized_once = True
-        pose_graph = graph.to_pose_graph(self.params.edge_noise_model >= 0.5)
+        pose_graph = graph.to_pose_graph(self.params.link_sigmas())
         if pose_graph.num_edges == 0:
             return None
         started = wallclock.perf_counter()

@@ -26,6 +26,8 @@ _RANGES: dict[str, tuple[float, bool, float, str]] = {
     "gate_drift_heading": (0.0, True, 1e9, "relocalisation test: heading drift per metre (rad/m)"),
     "gate_consensus": (0.0, True, 1e9, "relocalisation test: agreeing refusals that win (0: off)"),
     "edge_noise_model": (0.0, True, 1.0, "1: weigh edges by expected precision, 0: identity"),
+    "link_sigma_position": (0.0, False, 1e6, "position precision of a loop-closure link (m)"),
+    "link_sigma_heading": (0.0, False, 1e6, "heading precision of a loop-closure link (rad)"),
 }
 
 
@@ -68,6 +70,11 @@ class MapParams:
         edge_noise_model: 1 weighs each edge's residual by its expected precision
             (:mod:`~cogmap_core.edge_noise`); 0 gives every residual the same weight (the
             paper's formulation).
+        link_sigma_position: with the noise model, the position precision of a loop-closure
+            link (standard deviation, m): how well the front end places the robot at the place
+            it recognised. Loop closures keep unit weight and odometry is weighed relative to
+            them, so the Huber scale reads in metres of loop-closure error.
+        link_sigma_heading: ... and its heading precision (rad).
 
     """
 
@@ -87,6 +94,8 @@ class MapParams:
     gate_drift_heading: float = 0.02
     gate_consensus: float = 8.0
     edge_noise_model: float = 1.0
+    link_sigma_position: float = 0.03
+    link_sigma_heading: float = 0.1
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range."""
@@ -102,6 +111,12 @@ class MapParams:
                 f"known: {[f.name for f in fields(self)]}"
             )
         return replace(self, **changes)
+
+    def link_sigmas(self) -> tuple[float, float] | None:
+        """The loop-closure precision edges are weighed against; None for identity weights."""
+        if self.edge_noise_model < 0.5:
+            return None
+        return self.link_sigma_position, self.link_sigma_heading
 
     def to_dict(self) -> dict[str, float]:
         """Plain dict of all parameters (for JSON)."""

@@ -11,7 +11,11 @@ The default weighs each residual by its expected precision instead (a diagonal i
 matrix), scaled so that a loop-closure edge keeps unit weight -- the Huber scale still reads in
 metres of loop-closure error, as in the paper:
 
-- loop closure: sigma_xy = ``LINK_SIGMA_POSITION``, sigma_theta = ``LINK_SIGMA_HEADING``;
+- loop closure: sigma_xy and sigma_theta = the front end's link precision
+  (``MapParams.link_sigma_position`` and ``link_sigma_heading``: by default RatSLAM's view
+  matching, which places the robot within a few cm of the vertex, 3 cm, with its relative angle
+  good to a few degrees, 0.1 rad; for a log of place recognition its keyframe-level precision,
+  :data:`~cogmap_core.sources.odometry_log.LOG_MAP_CHANGES`);
 - sequential (odometry) edge of length ``d`` turning ``dtheta``: sigma_xy = ``ODOMETRY_SIGMA_0``
   + ``ODOMETRY_SIGMA_PER_METRE`` d, sigma_theta = ``ODOMETRY_SIGMA_0`` +
   ``ODOMETRY_SIGMA_PER_RADIAN`` |dtheta| + ``ODOMETRY_HEADING_PER_METRE`` d: wheel odometry's
@@ -25,8 +29,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-LINK_SIGMA_POSITION = 0.03  # m: loop closures place the robot within a few cm of the vertex
-LINK_SIGMA_HEADING = 0.1  # rad: view matching's relative angle is good to a few degrees
 ODOMETRY_SIGMA_0 = 0.005  # m and rad: the floor of any odometry step
 ODOMETRY_SIGMA_PER_METRE = 0.05  # m of position error per metre driven
 ODOMETRY_SIGMA_PER_RADIAN = 0.05  # rad of heading error per radian turned
@@ -34,32 +36,34 @@ ODOMETRY_HEADING_PER_METRE = 0.03  # rad of heading error per metre driven
 
 
 def edge_information(
-    kinds: NDArray[np.int8], relative_poses: NDArray[np.float64], noise_model: bool
+    kinds: NDArray[np.int8],
+    relative_poses: NDArray[np.float64],
+    link_sigmas: tuple[float, float] | None,
 ) -> NDArray[np.float64]:
     """``(E, 3, 3)`` information matrices of edges (see the module doc).
 
     Args:
         kinds: per edge, 0 sequential or 1 loop closure.
         relative_poses: ``(E, 3)`` measured relative poses (dx, dy, dtheta).
-        noise_model: False gives the paper's identity information.
+        link_sigmas: a loop-closure link's precision (position m, heading rad); None gives
+            the paper's identity information.
 
     """
     n = kinds.shape[0]
     info = np.zeros((n, 3, 3))
-    if not noise_model:
+    if link_sigmas is None:
         info[:, 0, 0] = info[:, 1, 1] = info[:, 2, 2] = 1.0
         return info
+    link_position, link_heading = link_sigmas
     d = np.hypot(relative_poses[:, 0], relative_poses[:, 1])
     turn = np.abs(relative_poses[:, 2])
     sequential = kinds == 0
-    sigma_xy = np.where(
-        sequential, ODOMETRY_SIGMA_0 + ODOMETRY_SIGMA_PER_METRE * d, LINK_SIGMA_POSITION
-    )
+    sigma_xy = np.where(sequential, ODOMETRY_SIGMA_0 + ODOMETRY_SIGMA_PER_METRE * d, link_position)
     sigma_th = np.where(
         sequential,
         ODOMETRY_SIGMA_0 + ODOMETRY_SIGMA_PER_RADIAN * turn + ODOMETRY_HEADING_PER_METRE * d,
-        LINK_SIGMA_HEADING,
+        link_heading,
     )
-    info[:, 0, 0] = info[:, 1, 1] = (LINK_SIGMA_POSITION / sigma_xy) ** 2
-    info[:, 2, 2] = (LINK_SIGMA_POSITION / sigma_th) ** 2
+    info[:, 0, 0] = info[:, 1, 1] = (link_position / sigma_xy) ** 2
+    info[:, 2, 2] = (link_position / sigma_th) ** 2
     return info

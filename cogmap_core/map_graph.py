@@ -349,11 +349,12 @@ class MapGraph:
             current_pose=current_pose,
         )
 
-    def to_pose_graph(self, noise_model: bool = False) -> PoseGraph:
+    def to_pose_graph(self, link_sigmas: tuple[float, float] | None = None) -> PoseGraph:
         """The live map as a pose graph, first live vertex fixed.
 
-        Information is the identity (the paper), or with ``noise_model`` each edge's expected
-        precision (:func:`~cogmap_core.edge_noise.edge_information`).
+        Information is the identity (the paper), or with ``link_sigmas`` (a loop closure's
+        position and heading precision) each edge's expected precision
+        (:func:`~cogmap_core.edge_noise.edge_information`).
         """
         ids = self.live_ids()
         e = self.live_edges()
@@ -368,6 +369,6 @@ class MapGraph:
             edge_from=index[:m],
             edge_to=index[m:],
             measurements=self.edge_rel[e].copy(),
-            information=edge_information(self.edge_kind[e], self.edge_rel[e], noise_model),
+            information=edge_information(self.edge_kind[e], self.edge_rel[e], link_sigmas),
             fixed=fixed,
         )

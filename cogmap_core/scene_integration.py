@@ -56,7 +56,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from cogmap_core.config import MapParams
-from cogmap_core.edge_noise import LINK_SIGMA_HEADING, LINK_SIGMA_POSITION
 from cogmap_core.geometry import between, compose_scalar
 from cogmap_core.map_graph import MapGraph, wrap
 
@@ -244,7 +243,8 @@ def _closing_residual(graph: MapGraph, run: RevisitRun, params: MapParams) -> fl
     place = graph.pose_of(run.end)
     predicted = compose_scalar(graph.pose_of(run.vertices[-1]), run.closing)
     dx, dy = predicted[0] - place[0], predicted[1] - place[1]
-    weight = LINK_SIGMA_POSITION / LINK_SIGMA_HEADING if params.edge_noise_model >= 0.5 else 1.0
+    sigmas = params.link_sigmas()
+    weight = 1.0 if sigmas is None else sigmas[0] / sigmas[1]
     return math.sqrt(dx * dx + dy * dy + (weight * wrap(predicted[2] - place[2])) ** 2)
 
 

@@ -40,9 +40,10 @@ def test_lecture_hall_maps_beat_dead_reckoning() -> None:
     score = session.loop_closure_score()
     assert score is not None and score.total == 110 and score.precision >= 0.85
     standard, compact = session.maps[MapMode.STANDARD], session.maps[MapMode.COMPACT]
-    assert session.ate(standard) <= 0.8 and session.ate(compact) <= 1.0
-    assert compact.num_vertices <= 0.3 * standard.num_vertices
+    # links weighed by place recognition's precision (measured: 0.371 m and 0.429 m)
+    assert session.ate(standard) <= 0.45 and session.ate(compact) <= 0.5
+    assert compact.num_vertices <= 0.32 * standard.num_vertices  # measured 929 / 3124
     for cmap in (standard, compact):
         fidelity = session.layout_fidelity(cmap, 0.5)
         assert fidelity is not None
-        assert min(fidelity.completeness, fidelity.correctness) >= 0.9
+        assert min(fidelity.completeness, fidelity.correctness) >= 0.95  # the target

@@ -152,6 +152,8 @@ def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: S
         ("integration_min_age", 1.0),
         ("gate_position", 0.01),
         ("edge_noise_model", 0.0),
+        ("link_sigma_position", 0.3),
+        ("link_sigma_heading", 0.5),
     ),
 )
 def test_maps_ignore_the_parameters_they_do_not_use(

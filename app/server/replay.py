@@ -69,6 +69,8 @@ _CLUSTERING_AND_OPTIMISATION = frozenset(
         "t_total",
         "huber_scale",
         "edge_noise_model",
+        "link_sigma_position",
+        "link_sigma_heading",
         "gate_position",
         "gate_heading",
         "gate_drift_position",
