@@ -40,8 +40,8 @@ centimetres that is right; with place recognition that is good to a keyframe spa
 and makes false matches, it breaks the odometry chain at every match: a false or coarse match
 displaces everything mapped after it, and the Huber loss on the loop edge cannot help because the
 edge is then the only link between before and after. Measured on Lecture Hall with these
-settings (``benchmarks/real_data.py``): standard map ATE 1.12 m with link + set current against
-0.55 m with links only (compact 0.78 m against 0.61 m), 2.7 m with the relocalisation test on. So
+settings (``benchmarks/real_data.py``): standard map ATE 2.33 m with link + set current against
+0.37 m with links only (compact 2.81 m against 0.43 m), 2.66 m with the relocalisation test on. So
 this source emits links only (``relocalise=False``): odometry stays continuous and a false loop
 edge is one robust residual among many. ``relocalise=True`` restores RatSLAM's behaviour.
 
