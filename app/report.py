@@ -217,8 +217,8 @@ class ReportFolder:
         (out / MARKER).unlink(missing_ok=True)  # incomplete until the new marker is in place
         for name in self.written:
             os.replace(staging / name, out / name)
-        for name in previous:
-            if name not in self.written and (out / name).is_file():
+        for name in previous:  # the marker is only a file: trust it for our own names only
+            if name in self.names and name not in self.written and (out / name).is_file():
                 (out / name).unlink()
         os.replace(staging / MARKER, out / MARKER)
         staging.rmdir()

@@ -137,6 +137,20 @@ def test_force_over_an_old_report_drops_only_its_stale_files(bag: Path, tmp_path
     ]
 
 
+def test_force_never_deletes_a_file_the_marker_names_that_is_not_a_report_file(
+    bag: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    old_report(bag, out)
+    (out / "precious.txt").write_text("mine")
+    marker = json.loads((out / MARKER).read_text())
+    marker["files"].append("precious.txt")  # a hand-edited or foreign marker
+    (out / MARKER).write_text(json.dumps(marker))
+    assert main(["run", str(bag), "--out", str(out), "--force"]) == 0
+    assert (out / "precious.txt").read_text() == "mine"
+    assert "precious.txt" not in json.loads((out / MARKER).read_text())["files"]
+
+
 def test_a_folder_named_like_a_report_file_is_refused_before_any_work(
     bag: Path, tmp_path: Path, capsys
 ) -> None:
