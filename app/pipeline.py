@@ -25,9 +25,9 @@ from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError, InputFileError, ParameterError
+from cogmap_core.errors import CogmapError, InputFileError, OutputError, ParameterError
 from cogmap_core.evaluation import LAYOUT_RADIUS, align_rigid_2d
-from cogmap_core.fileio import check_writable
+from cogmap_core.fileio import check_writable, output_error
 from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
@@ -462,7 +462,10 @@ class HeadlessPipeline:
     def _save_session(self, path: Path) -> None:
         assert self.meta is not None
         started = wallclock.perf_counter()
-        save_session(path, self.session, self.meta)
+        try:
+            save_session(path, self.session, self.meta)
+        except OSError as exc:  # the disk filled up or went read-only during the run
+            raise output_error(path, exc) from None
         self.session_notes.append(
             f"session saved to {path} ({path.stat().st_size / 1e6:.1f} MB) in "
             f"{wallclock.perf_counter() - started:.2f} s: "
@@ -562,14 +565,14 @@ class HeadlessPipeline:
 def check_session_target(path: Path, force: bool) -> None:
     """Refuse a session file target that would fail only at the end of a long run."""
     if path.is_dir():
-        raise InputFileError(f"{path} is a directory; give --save-session a file name")
+        raise OutputError(f"{path} is a directory; give --save-session a file name")
     if path.exists() and not force:
-        raise InputFileError(
+        raise OutputError(
             f"{path} already exists; choose another --save-session file or pass --force to "
             "overwrite it"
         )
     if not path.parent.is_dir():
-        raise InputFileError(f"folder {path.parent} of --save-session does not exist; create it")
+        raise OutputError(f"folder {path.parent} of --save-session does not exist; create it")
     check_writable(path.parent)  # a probe file: mode bits do not stop root
 
 

@@ -357,6 +357,28 @@ def test_full_disk_faked_keeps_the_old_report(
     assert snapshot(out) == old
 
 
+def test_full_disk_while_saving_the_session_is_one_line_and_keeps_the_old_session(
+    bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    import numpy as np
+
+    session = tmp_path / "maze.session.npz"
+    session.write_bytes(b"yesterday's session")
+
+    def full(handle: object, **arrays: object) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(np, "savez_compressed", full)
+    args = ["run", str(bag), "--out", str(tmp_path / "out"), "--save-session", str(session)]
+    assert main([*args, "--force"]) == 2
+    assert one_line_error(capsys.readouterr().err) == (
+        f"cogmap run: error: cannot write {session}: No space left on device (the disk is full; "
+        "free some space or write somewhere else)"
+    )
+    assert session.read_bytes() == b"yesterday's session"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["maze.session.npz"]
+
+
 # ------------------------------------------------------------------------- other outputs
 def test_written_files_get_the_users_normal_permissions(bag: Path, tmp_path: Path) -> None:
     umask = os.umask(0o022)
