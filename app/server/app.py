@@ -64,18 +64,15 @@ from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagTopics, open_bag
 from cogmap_core.errors import CogmapError
 from cogmap_core.event_file import KIND_LINK
-from cogmap_core.events import LinkToVertex
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.slam import ALL_MODES, EventLog, SlamSession
 from cogmap_core.sources.detect import LogOptions
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
 log = logging.getLogger(__name__)
 
-MODE_LABELS: dict[str, MapMode] = {m.value: m for m in MapMode}
-ORDER = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 SPEEDS: dict[str, float] = {
     "0.25x": 0.25,
     "0.5x": 0.5,
@@ -202,8 +199,8 @@ class CogmapApp:
         self._false_key: tuple[int, int] | None = None
         self._odometry_key: tuple[int, int] | None = None
         self._odometry = np.zeros((0, 3))
-        self._links_counted = (0, 0)  # (events counted, LinkToVertex among them)
-        self._suppress_param_events = False
+        # set while the app itself sets a control (per thread: viser runs callbacks on a
+        # pool, and another viewer's change must not be swallowed meanwhile)
         self._setting = threading.local()
         self._pending_frame: tuple[Frame, int | None] | None = None
         self.status_note = ""
@@ -446,11 +443,6 @@ class CogmapApp:
         if self.replay_path.value in defaults:  # keep a path the user typed
             self.replay_path.value = str(default_replay_path(self.static_dir, modes[0]))
 
-    @property
-    def shown_modes(self) -> tuple[MapMode, ...]:
-        """The maps of the default view."""
-        return self._default_modes
-
     def views_changed(self) -> None:
         """Stream what the views show (a view changed); the shown maps rebuild first."""
         with self.replay.lock, self.scene_lock:
@@ -594,14 +586,14 @@ class CogmapApp:
         self.params_md.content = self._params_message(message, error)
 
     def _set_quietly(self, handle: Any, value: Any) -> None:
-        self._suppress_param_events = True
+        self._setting.params = True
         try:
             handle.value = value
         finally:
-            self._suppress_param_events = False
+            self._setting.params = False
 
     def _on_slider(self, spec: SliderSpec) -> None:
-        if self._suppress_param_events:
+        if getattr(self._setting, "params", False):
             return
         slider = self.param_sliders[spec.name]
         value = clamp_to_slider(spec, slider.value)
@@ -639,7 +631,7 @@ class CogmapApp:
         return remembered
 
     def _on_box(self, spec: SliderSpec) -> None:
-        if self._suppress_param_events:
+        if getattr(self._setting, "params", False):
             return
         box = self.param_boxes[spec.name]
         try:
@@ -707,13 +699,13 @@ class CogmapApp:
     def reset_params(self) -> None:
         """Back to the default parameter values (the paper's, or the log's; one rebuild)."""
         defaults = self.defaults
-        self._suppress_param_events = True
+        self._setting.params = True
         try:
             for name, slider in self.param_sliders.items():
                 slider.value = getattr(defaults, name)
                 self.param_boxes[name].value = format_value(getattr(defaults, name))
         finally:
-            self._suppress_param_events = False
+            self._setting.params = False
         self.params_md.content = self._params_message(self._defaults_name())
         if self.replay.params != defaults:
             self.replay.set_params(defaults)
@@ -798,7 +790,7 @@ class CogmapApp:
         if forced:
             todo: tuple[MapMode, ...] = modes
         elif self._figures_limit.due():
-            todo = ORDER
+            todo = ALL_MODES
         else:
             return
         with self._figures_cond:
@@ -812,7 +804,7 @@ class CogmapApp:
                     self._figures_cond.wait(0.5)
                 if self._figures_stop:
                     return
-                todo = [m for m in ORDER if m in self._figures_todo]
+                todo = [m for m in ALL_MODES if m in self._figures_todo]
                 self._figures_todo.clear()
                 self._figures_busy = True
             try:
@@ -949,12 +941,7 @@ class CogmapApp:
         log_ = self.replay.session.log
         k = self.replay.cursor
         end = log_.frame_end[k - 1] if k else 0
-        counted, links = self._links_counted
-        if end < counted:
-            counted, links = 0, 0
-        links += sum(1 for e in log_.events[counted:end] if isinstance(e, LinkToVertex))
-        self._links_counted = (end, links)
-        return links
+        return int(np.count_nonzero(log_.columns(end)["kind"] == KIND_LINK))
 
     def map_figures(self, mode: MapMode, cmap: CognitiveMap) -> dict[str, str]:
         """A map's figures as the page writes them."""
@@ -990,12 +977,12 @@ class CogmapApp:
             ("loops-detected", "loop closures detected", str(self._loop_closures_detected())),
             ("loops-false", "… of them false (ground truth)", str(self._false_times.size)),
         ]
-        n = len(ORDER)
+        n = len(ALL_MODES)
         body = "".join(
             f'<tr><td>{label}</td><td colspan="{n}" id="cogmap-{key}">{value}</td></tr>'
             for key, label, value in rows
         )
-        figures = {m: self.map_figures(m, session.maps[m]) for m in ORDER}
+        figures = {m: self.map_figures(m, session.maps[m]) for m in ALL_MODES}
         radius = f"{session.evaluation.layout_radius * 100:g} cm"  # the input kind's
         sections = (
             (
@@ -1028,12 +1015,12 @@ class CogmapApp:
                 ),
             ),
         )
-        head = "".join(f"<th>{html.escape(m.value.replace('_', ' '))}</th>" for m in ORDER)
+        head = "".join(f"<th>{html.escape(m.value.replace('_', ' '))}</th>" for m in ALL_MODES)
         for title, keys in sections:
             body += f'<tr class="cogmap-section"><td colspan="{n + 1}">{title}</td></tr>'
             for key, label in keys:
                 cells = "".join(
-                    f'<td id="cogmap-{m.value}-{key}">{figures[m][key]}</td>' for m in ORDER
+                    f'<td id="cogmap-{m.value}-{key}">{figures[m][key]}</td>' for m in ALL_MODES
                 )
                 body += f"<tr><td>{label}</td>{cells}</tr>"
         content = (
@@ -1207,7 +1194,6 @@ class CogmapApp:
                 self._false_key = None
                 self._false_times = np.zeros(0)
                 self._odometry_key = None
-                self._links_counted = (0, 0)
                 self.replay = self._make_replay(path, params, speed, True)
                 self.started_at = time.monotonic()
             self.views_changed()

@@ -20,13 +20,13 @@ from numpy.typing import NDArray
 
 from app.server.scene import MAP_COLORS
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.slam import ALL_MODES
 
-ORDER = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 SHORT = {MapMode.STANDARD: "std", MapMode.SCENE_INTEGRATION: "s.i.", MapMode.COMPACT: "compact"}
 #: Samples of the size curves over the data so far.
 CHART_POINTS = 400
 #: Series: x, then per map vertices and edges, then per map its optimisation markers.
-NUM_SERIES = 1 + 2 * len(ORDER) + len(ORDER)
+NUM_SERIES = 1 + 2 * len(ALL_MODES) + len(ALL_MODES)
 #: A marker series' value where it has no marker (outside the y range: not drawn).
 OFF_CHART = -1e9
 
@@ -39,7 +39,7 @@ def _rgb(mode: MapMode) -> str:
 def chart_series(maps: dict[MapMode, CognitiveMap] | None = None) -> tuple[viser.uplot.Series, ...]:
     """The series (labels with the maps' current sizes and optimisation counts)."""
     series: list[viser.uplot.Series] = [{"label": "data time (s)"}]
-    for mode in ORDER:
+    for mode in ALL_MODES:
         cmap = None if maps is None else maps.get(mode)
         v = "–" if cmap is None else str(cmap.num_vertices)
         e = "–" if cmap is None else str(cmap.num_edges)
@@ -47,7 +47,7 @@ def chart_series(maps: dict[MapMode, CognitiveMap] | None = None) -> tuple[viser
         series.append(
             {"label": f"{SHORT[mode]} E {e}", "stroke": _rgb(mode), "width": 1, "dash": (5.0, 4.0)}
         )
-    for mode in ORDER:
+    for mode in ALL_MODES:
         cmap = None if maps is None else maps.get(mode)
         n = "–" if cmap is None else str(len(cmap.optimizations))
         series.append(
@@ -93,14 +93,14 @@ def chart_data(
         mode: np.array([o.time for o in maps[mode].optimizations if o.time <= end])
         if mode in maps
         else np.zeros(0)
-        for mode in ORDER
+        for mode in ALL_MODES
     }
     times = np.unique(
         np.concatenate([np.linspace(0.0, max(end, 1e-3), points), *optimisations.values()])
     )
     data: list[NDArray[np.float64]] = [times]
     sizes: dict[MapMode, NDArray[np.float64]] = {}
-    for mode in ORDER:
+    for mode in ALL_MODES:
         if mode not in maps:
             data += [np.zeros_like(times), np.zeros_like(times)]
             sizes[mode] = np.zeros_like(times)
@@ -113,7 +113,7 @@ def chart_data(
         edges = np.where(ok, e[safe] if e.size else 0, 0).astype(float)
         data += [vertices, edges]
         sizes[mode] = vertices
-    for mode in ORDER:
+    for mode in ALL_MODES:
         marker = np.full_like(times, OFF_CHART)
         at = np.isin(times, optimisations[mode])
         marker[at] = sizes[mode][at]

@@ -60,11 +60,6 @@ def g2o_bytes(cmap: CognitiveMap) -> bytes:
     return "".join(format_g2o(cmap.to_pose_graph())).encode()
 
 
-def truncated_log(log: EventLog, frames: int) -> EventLog:
-    """A copy of the first ``frames`` frames of ``log``."""
-    return log.truncated(frames)
-
-
 def view_session(replay: Replay) -> SlamSession:
     """A session holding the replay's current maps and the log up to its current frame.
 
@@ -74,7 +69,7 @@ def view_session(replay: Replay) -> SlamSession:
     view = SlamSession(
         source.params, replay.frontend_config, source.modes, evaluation=source.evaluation
     )
-    view.log = truncated_log(source.log, replay.cursor)
+    view.log = source.log.truncated(replay.cursor)
     view.maps.maps = dict(source.maps.maps)
     view.finished = replay.at_end
     return view
@@ -251,7 +246,7 @@ def save_html_replay(
     if path.exists() and _EMBED_MARKER not in path.read_text(encoding="utf-8", errors="replace"):
         raise InputFileError(f"{path} exists and is not a cogmap replay; choose another path")
     with replay.lock:
-        log = truncated_log(replay.session.log, replay.cursor)
+        log = replay.session.log.truncated(replay.cursor)
         params = replay.session.params
         finish = replay.at_end
     if log.frames == 0:

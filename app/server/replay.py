@@ -161,7 +161,6 @@ class RebuildRecord:
 
 
 #: A newer request arrived during a rebuild.
-_Interrupted = Abandoned
 
 
 class Replay:
@@ -432,7 +431,7 @@ class Replay:
                     self._do_rebuild()
                 else:
                     self._do_advance(stepping)
-            except _Interrupted:
+            except Abandoned:
                 pass
             except CogmapError as exc:
                 self._fail(str(exc))
@@ -707,7 +706,7 @@ class Replay:
                     self._seek_to_frame(log.frames)
                 with self._cond:
                     self._fast_forward_to = target
-        except _Interrupted:
+        except Abandoned:
             with self._cond:
                 if self._seek_request is None and not self._restart_request:
                     self._seek_request = target  # interrupted by parameters: seek again

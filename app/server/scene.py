@@ -494,7 +494,6 @@ class MapLayer:
         self.false_count = 0
         self.extent: tuple[float, float, float, float] | None = None  # xmin, xmax, ymin, ymax
         self._segments = np.zeros((0, 2, 3), dtype=np.float32)
-        self._snapshot_kind = np.zeros(0, dtype=np.int8)
 
     # ------------------------------------------------------------------ layout
     @property

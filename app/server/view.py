@@ -21,7 +21,6 @@ from __future__ import annotations
 import html
 import math
 import threading
-import time
 import warnings
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -164,7 +163,6 @@ class ClientView:
         self._pinned_frame: viser.FrameHandle | None = None
         self._selection: list[viser.SceneNodeHandle] = []
         self._framed: tuple[float, float, float, float] | None = None
-        self._camera_set_at = -math.inf
         self._camera_expected: NDArray[np.float64] | None = None
         self._camera_acknowledged = False
         self._log_key: tuple[Any, ...] | None = None
@@ -420,7 +418,6 @@ class ClientView:
             position = (cx, cy - 0.02 * distance, distance)
         else:
             position = (cx + 0.35 * distance, cy - 0.75 * distance, 0.65 * distance)
-        self._camera_set_at = time.monotonic()
         self._camera_expected = np.array(position)
         self._camera_acknowledged = False
         self._framed = extent
