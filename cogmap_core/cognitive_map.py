@@ -49,8 +49,8 @@ from cogmap_core.clustering import Cluster, LoopClosureClusterer
 from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
-from cogmap_core.geometry import compose, compose_scalar, inverse_scalar
-from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot, wrap
+from cogmap_core.geometry import TWO_PI, compose, compose_scalar, inverse_scalar, wrap_scalar
+from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot
 from cogmap_core.neighborhood_fields import is_novel, neighborhood_field
 from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph
 from cogmap_core.posegraph import PoseGraph
@@ -60,7 +60,6 @@ from cogmap_core.short_edges import remove_short_edges
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-TWO_PI = 2.0 * math.pi
 _ZERO = (0.0, 0.0, 0.0)
 
 
@@ -450,7 +449,7 @@ class CognitiveMap:
 
     def _set_current(self, vid: int, offset: tuple[float, float, float] | list[float]) -> None:
         self._current = vid
-        self._accum = [float(offset[0]), float(offset[1]), wrap(float(offset[2]))]
+        self._accum = [float(offset[0]), float(offset[1]), wrap_scalar(float(offset[2]))]
         self._travelled = 0.0
 
     def _record_size(self, t: float) -> None:

@@ -35,6 +35,17 @@ ODOMETRY_SIGMA_PER_RADIAN = 0.05  # rad of heading error per radian turned
 ODOMETRY_HEADING_PER_METRE = 0.03  # rad of heading error per metre driven
 
 
+def link_heading_weight(link_sigmas: tuple[float, float] | None) -> float:
+    """Metres of loop-closure error one radian of a loop closure's heading error weighs.
+
+    The ratio :func:`edge_information` gives a loop-closure edge's heading residual against its
+    position residual (1 with identity information).
+    """
+    if link_sigmas is None:
+        return 1.0
+    return link_sigmas[0] / link_sigmas[1]
+
+
 def edge_information(
     kinds: NDArray[np.int8],
     relative_poses: NDArray[np.float64],

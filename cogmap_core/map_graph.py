@@ -24,18 +24,18 @@ from numpy.typing import NDArray
 
 from cogmap_core.edge_noise import edge_information
 from cogmap_core.errors import EventError
-from cogmap_core.geometry import compose, compose_scalar, inverse_scalar, relative_to_polar
+from cogmap_core.geometry import (
+    compose,
+    compose_scalar,
+    inverse_scalar,
+    relative_to_polar,
+    wrap_scalar,
+)
 from cogmap_core.posegraph import PoseGraph
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 Pose = tuple[float, float, float]
-TWO_PI = 2.0 * math.pi
-
-
-def wrap(angle: float) -> float:
-    """Wrap an angle to ``[-pi, pi)``."""
-    return (angle + math.pi) % TWO_PI - math.pi
 
 
 class EdgeKind(IntEnum):
@@ -143,7 +143,7 @@ class MapGraph:
 
     def add_vertex(self, vertex_id: int, pose: Pose | list[float]) -> None:
         """Make a registered id a live vertex at ``pose``."""
-        self.pose[vertex_id] = (pose[0], pose[1], wrap(pose[2]))
+        self.pose[vertex_id] = (pose[0], pose[1], wrap_scalar(pose[2]))
         self.alive[vertex_id] = True
         self.alias[vertex_id] = vertex_id
         self.alias_offset[vertex_id] = 0.0
@@ -199,7 +199,7 @@ class MapGraph:
             self.edge_cluster = _grow(self.edge_cluster, new, fill=-1)
             self.edge_alive = _grow(self.edge_alive, new)
         self.edge_from[k], self.edge_to[k] = src, dst
-        self.edge_rel[k] = (rel[0], rel[1], wrap(rel[2]))
+        self.edge_rel[k] = (rel[0], rel[1], wrap_scalar(rel[2]))
         self.edge_time[k] = t
         self.edge_kind[k] = kind
         self.edge_cluster[k] = cluster
@@ -230,10 +230,6 @@ class MapGraph:
         """Indices of the live edges, in creation order."""
         return np.flatnonzero(self.edge_alive[: self.num_edges_total]).astype(np.int64)
 
-    def edge_length(self, k: int) -> float:
-        """Length of edge ``k``'s measured translation (m)."""
-        return math.hypot(self.edge_rel[k, 0], self.edge_rel[k, 1])
-
     # ------------------------------------------------------------------ merging
     def merge_vertex(self, removed: int, kept: int, offset: Pose | list[float]) -> None:
         """Remove vertex ``removed`` and re-attach its edges to ``kept``.
@@ -249,10 +245,7 @@ class MapGraph:
             del self.adjacency[removed][other]
             del self.adjacency[other][removed]
             if other == kept or other in kept_adjacency:
-                self.edge_alive[k] = False
-                self.num_edges -= 1
-                if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
-                    self.num_loop_edges -= 1
+                self.remove_edge(k)
                 continue
             if self.edge_from[k] == removed:
                 self.edge_from[k] = kept
@@ -297,37 +290,6 @@ class MapGraph:
                     best[w] = nd
                     heapq.heappush(heap, (nd, w))
         return False
-
-    def shortest_path(
-        self, source: int, target: int, limit: float, excluded: set[int]
-    ) -> tuple[list[int], float] | None:
-        """Shortest path ``source -> target`` (vertex list, length) avoiding ``excluded``.
-
-        Only paths shorter than ``limit`` are searched; None when there is none.
-        """
-        best = {source: 0.0}
-        parent: dict[int, int] = {}
-        heap = [(0.0, source)]
-        rel = self.edge_rel
-        while heap:
-            dist, v = heapq.heappop(heap)
-            if v == target:
-                path = [v]
-                while v in parent:
-                    v = parent[v]
-                    path.append(v)
-                return path[::-1], dist
-            if dist > best.get(v, math.inf):
-                continue
-            for w, k in self.adjacency[v].items():
-                if w in excluded:
-                    continue
-                nd = dist + math.hypot(rel[k, 0], rel[k, 1])
-                if nd < best.get(w, math.inf) and nd < limit:
-                    best[w] = nd
-                    parent[w] = v
-                    heapq.heappush(heap, (nd, w))
-        return None
 
     # ------------------------------------------------------------------ views
     def snapshot(self, current_vertex: int, current_pose: FloatArray) -> MapSnapshot:

@@ -24,8 +24,3 @@ def is_novel(
     """Whether a movement ``(dx, dy, dtheta)`` since the last vertex earns a new vertex."""
     d = math.hypot(movement[0], movement[1])
     return neighborhood_field(d, movement[2], alpha, beta) > delta
-
-
-def straight_spacing(alpha: float, delta: float) -> float:
-    """Distance between vertices on a straight run: the d with g(d, 0) = delta (m)."""
-    return (delta - 1.0) / alpha if alpha > 0 else math.inf

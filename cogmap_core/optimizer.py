@@ -52,6 +52,7 @@ IntArray = NDArray[np.int64]
 
 _IDENTITY = np.eye(3)
 AUTO_LAGO_COST_PER_EDGE = 1.0
+"""With ``initialization="auto"``: LAGO when the initial cost exceeds this many units per edge."""
 
 
 def _quiet_ceres() -> None:
@@ -71,7 +72,6 @@ def _quiet_ceres() -> None:
 
 
 _quiet_ceres()
-"""With ``initialization="auto"``: LAGO when the initial cost exceeds this many units per edge."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -378,7 +378,6 @@ class _Snapshot:
         self.dense_target = plan.target[keep]
         self.dense_source = np.flatnonzero(keep) if not keep.all() else None
         self.has_jacobians = False
-        self.recomputed_groups = 0
 
     def take(self, chunk_values: list[FloatArray], with_jacobians: bool) -> None:
         self.poses.reshape(-1)[:] = np.concatenate(chunk_values)
@@ -454,7 +453,6 @@ class _EdgeGroupCost(pyceres.CostFunction):
                         block[:] = dense[a:b]
             return True
         # Ceres evaluated this block at another point than the snapshot: compute it on its own.
-        snap.recomputed_groups += 1
         plan = self.plan
         x = np.concatenate(parameters).reshape(-1, 3)
         edges = slice(self.first, self.end)

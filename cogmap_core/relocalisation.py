@@ -47,8 +47,8 @@ import math
 from dataclasses import dataclass
 
 from cogmap_core.config import MapParams
-from cogmap_core.geometry import compose_scalar, inverse_scalar
-from cogmap_core.map_graph import MapGraph, wrap
+from cogmap_core.geometry import compose_scalar, inverse_scalar, wrap_scalar
+from cogmap_core.map_graph import MapGraph
 
 CONSENSUS_WINDOW = 5.0
 """Refusals older than this (s) no longer count towards a consensus."""
@@ -121,7 +121,7 @@ def check_relocalisation(
     place = compose_scalar(graph.pose[vertex].tolist(), offset)
     position_error = math.hypot(pose[0] - place[0], pose[1] - place[1])
     claimed = (place[0], place[1], place[2] + relative_rad)
-    heading_error = abs(wrap(pose[2] - claimed[2]))
+    heading_error = abs(wrap_scalar(pose[2] - claimed[2]))
     correction = compose_scalar(claimed, inverse_scalar(pose))
     p = params
     heading_tolerance = p.gate_heading + abs(robot.frame_rotation)
@@ -191,7 +191,7 @@ def _agree(
     pa, pb = compose_scalar(a, robot), compose_scalar(b, robot)
     return (
         math.hypot(pa[0] - pb[0], pa[1] - pb[1]) <= params.gate_position
-        and abs(wrap(pa[2] - pb[2])) <= params.gate_heading
+        and abs(wrap_scalar(pa[2] - pb[2])) <= params.gate_heading
     )
 
 

@@ -56,8 +56,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from cogmap_core.config import MapParams
-from cogmap_core.geometry import between, compose_scalar
-from cogmap_core.map_graph import MapGraph, wrap
+from cogmap_core.edge_noise import link_heading_weight
+from cogmap_core.geometry import between, compose_scalar, wrap_scalar
+from cogmap_core.map_graph import MapGraph
 
 
 @dataclass(slots=True)
@@ -65,7 +66,8 @@ class RevisitRun:
     """Vertices created between two relocalisations on known ground.
 
     Attributes:
-        start: vertex id the robot was at when the run began.
+        start: vertex id the robot was at when the run began (or, when a link alone
+            re-localised it there, the vertex that link joined it to).
         vertices: the vertices created, in order.
         created: data time of the first vertex.
         end: vertex id the robot re-localised on when the run closed (-1 while open).
@@ -84,7 +86,11 @@ class RevisitRun:
 
 
 class KnownEdges:
-    """Spatial index of the map's live edges (built after an optimisation, when poses settle).
+    """Spatial index of the map's live edges, as they were when it was built.
+
+    Built when a run is first judged and kept until the next batch optimisation moves the poses
+    (new edges and merges since are not in it; when it is built is part of the map's result and
+    is saved with sessions).
 
     Each edge is cut into pieces no longer than the integration radius; a KD-tree over the piece
     midpoints answers "which edges pass within ``radius`` of this point", exactly. Each edge
@@ -243,9 +249,8 @@ def _closing_residual(graph: MapGraph, run: RevisitRun, params: MapParams) -> fl
     place = graph.pose_of(run.end)
     predicted = compose_scalar(graph.pose_of(run.vertices[-1]), run.closing)
     dx, dy = predicted[0] - place[0], predicted[1] - place[1]
-    sigmas = params.link_sigmas()
-    weight = 1.0 if sigmas is None else sigmas[0] / sigmas[1]
-    return math.sqrt(dx * dx + dy * dy + (weight * wrap(predicted[2] - place[2])) ** 2)
+    weight = link_heading_weight(params.link_sigmas())
+    return math.sqrt(dx * dx + dy * dy + (weight * wrap_scalar(predicted[2] - place[2])) ** 2)
 
 
 def _merge(graph: MapGraph, removed: int, kept: int) -> None:

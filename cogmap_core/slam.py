@@ -21,7 +21,7 @@ from typing import Any, overload
 import numpy as np
 from numpy.typing import NDArray
 
-from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode, MapSet
+from cogmap_core.cognitive_map import CognitiveMap, MapMode, MapSet
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
@@ -120,7 +120,7 @@ class EventView(Sequence[MapEvent]):
 class EventLog:
     """Front-end events of every frame processed so far, with the ground truth per frame.
 
-    Everything is kept in column arrays grown by doubling (about 49 bytes per event and 33 per
+    Everything is kept in column arrays grown by doubling (about 49 bytes per event and 41 per
     frame), in the layout of :mod:`cogmap_core.event_file` plus a ``score`` column (each link's
     place-recognition score, NaN where there is none): a long run costs a few megabytes, not a
     Python object per event. :attr:`events` gives them back as event objects.
@@ -658,11 +658,10 @@ class SlamSession:
 
 def optimisation_summary(cmap: CognitiveMap) -> dict[str, float | int]:
     """Counts and timing of a map's optimisations and loop closures."""
-    snap = cmap.snapshot()
     return {
         "vertices": cmap.num_vertices,
         "edges": cmap.num_edges,
-        "loop_edges": int(np.count_nonzero(snap.edge_kind == EdgeKind.LOOP_CLOSURE)),
+        "loop_edges": cmap.num_loop_edges,
         "clusters": len(cmap.clusters),
         "optimizations": len(cmap.optimizations),
         "optimize_wall_s": float(sum(o.wall_s for o in cmap.optimizations)),
