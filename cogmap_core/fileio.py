@@ -138,7 +138,8 @@ def atomic_writer(
 
     The temporary file ``.<name>.partial-<pid>.<hex>`` gets the user's normal permissions and is
     flushed to disk before the rename. On any exception (including Ctrl-C) it is deleted and
-    ``path`` is left as it was.
+    ``path`` is left as it was; temporary files of ``path`` left by killed processes are
+    deleted first.
 
     Raises:
         OSError: the folder cannot be written (the caller words the message, see
@@ -146,6 +147,7 @@ def atomic_writer(
 
     """
     path = Path(path)
+    remove_stale(path.parent, f".{path.name}.partial-*")  # a killed writer's leftovers
     tmp = path.with_name(f"{partial_name(path.name)}.{secrets.token_hex(4)}")
     fd = create_file(tmp)
     try:

@@ -393,6 +393,23 @@ def test_written_files_get_the_users_normal_permissions(bag: Path, tmp_path: Pat
         assert path.stat().st_mode & 0o777 == 0o644, path.name
 
 
+def test_a_killed_writers_temporary_file_is_removed_by_the_next_write(tmp_path: Path) -> None:
+    finished = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    dead = tmp_path / f".g.g2o.partial-{int(finished.stdout)}.0a1b2c3d"
+    dead.write_text("half a graph from a killed run")
+    running = tmp_path / f".g.g2o.partial-{os.getpid()}.deadbeef"  # a writer still at work
+    running.write_text("being written")
+    mine = tmp_path / f".other.g2o.partial-{int(finished.stdout)}.00000000"  # not this file's
+    mine.write_text("another file's leftover")
+    write_g2o(small_graph(), tmp_path / "g.g2o")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["g.g2o", running.name, mine.name])
+
+
 def test_optimize_checks_the_output_folder_before_optimising(
     tmp_path: Path, data_dir: Path, monkeypatch: pytest.MonkeyPatch, capsys
 ) -> None:
