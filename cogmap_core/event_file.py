@@ -22,7 +22,6 @@ Files are written to a temporary name beside the target and renamed when complet
 from __future__ import annotations
 
 import json
-import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,13 +32,13 @@ from numpy.typing import NDArray
 
 from cogmap_core.errors import InputFileError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
-from cogmap_core.fileio import atomic_writer
+from cogmap_core.fileio import atomic_writer, load_archive
 
 FORMAT_NAME = "cogmap-events"
 FORMAT_VERSION = 1
 
 KIND_ODOMETRY, KIND_CREATE, KIND_LINK, KIND_SET = 0, 1, 2, 3
-_REQUIRED = ("header", "kind", "time", "ref", "view", "value0", "value1", "frame_end", "frame_time")
+_COLUMNS_REQUIRED = ("kind", "time", "ref", "view", "value0", "value1", "frame_end", "frame_time")
 
 
 @dataclass
@@ -157,35 +156,16 @@ def load_event_file(path: Path | str) -> EventRecording:
             inconsistent arrays (one line naming the problem).
 
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputFileError(f"{path}: no such event file")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [name for name in _REQUIRED if name not in data.files]
-            if missing:
-                raise InputFileError(
-                    f"{path}: not a cogmap event file (missing {', '.join(missing)})"
-                )
-            arrays = {name: data[name] for name in data.files}
-    except InputFileError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputFileError(
-            f"{path}: not a readable cogmap event file ({type(exc).__name__}: {exc}); "
-            "re-create it from the bag"
-        ) from None
-    try:
-        header = json.loads(str(arrays["header"]))
-    except json.JSONDecodeError:
-        raise InputFileError(f"{path}: the event file's header is not valid JSON") from None
-    if header.get("format") != FORMAT_NAME:
-        raise InputFileError(f"{path}: not a cogmap event file (format {header.get('format')!r})")
-    if header.get("version") != FORMAT_VERSION:
-        raise InputFileError(
-            f"{path}: event file version {header.get('version')!r} is not supported "
-            f"(this cogmap reads version {FORMAT_VERSION}); re-create it from the bag"
-        )
+    header, arrays = load_archive(
+        Path(path),
+        "event",
+        FORMAT_NAME,
+        FORMAT_VERSION,
+        InputFileError,
+        required=_COLUMNS_REQUIRED,
+        advice="re-create it from the bag",
+        version_advice="re-create it from the bag",
+    )
     n = arrays["kind"].shape[0]
     if any(arrays[c].shape != (n,) for c in ("time", "ref", "view", "value0", "value1")):
         raise InputFileError(f"{path}: event columns have different lengths; the file is corrupt")

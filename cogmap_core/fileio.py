@@ -14,17 +14,22 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import json
 import os
 import re
 import secrets
 import shutil
 import signal
 import threading
-from collections.abc import Iterator
+import zipfile
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any
 
-from cogmap_core.errors import OutputError
+import numpy as np
+from numpy.typing import NDArray
+
+from cogmap_core.errors import CogmapError, OutputError
 
 _PID_SUFFIX = re.compile(r"\.partial-(\d+)(?:\.[0-9a-f]+)?$")
 
@@ -212,3 +217,57 @@ def interrupts_deferred() -> Iterator[None]:
             signal.signal(sig, handler)  # type: ignore[arg-type]
         if received:
             signal.raise_signal(received[0])
+
+
+def load_archive(
+    path: Path,
+    what: str,
+    format_name: str,
+    version: int,
+    error: type[CogmapError],
+    required: Sequence[str] = (),
+    advice: str = "",
+    version_advice: str = "",
+) -> tuple[dict[str, Any], dict[str, NDArray[Any]]]:
+    """Read one of cogmap's ``.npz`` archives: its JSON header and its arrays.
+
+    The archive holds a ``header`` array (a JSON object with ``format`` and ``version``) beside
+    the data arrays. ``what`` names the kind in messages ("event" for "no such event file");
+    ``advice`` ends the message of an unreadable file, ``version_advice`` that of another version.
+
+    Returns:
+        The header and the arrays (without the header), all read into memory.
+
+    Raises:
+        error: a missing, truncated or corrupt file, a required array missing, a header that is
+            not a JSON object of this format, or another version (one line naming the problem).
+
+    """
+    if not path.is_file():
+        raise error(f"{path}: no such {what} file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [name for name in ("header", *required) if name not in data.files]
+            if missing:
+                raise error(f"{path}: not a cogmap {what} file (missing {', '.join(missing)})")
+            arrays = {name: data[name] for name in data.files}
+    except error:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
+        raise error(
+            f"{path}: not a readable cogmap {what} file ({type(exc).__name__}: "
+            f"{' '.join(str(exc).split())}); {advice}"
+        ) from None
+    try:
+        header = json.loads(str(arrays.pop("header")))
+    except ValueError:  # (json.JSONDecodeError is one)
+        raise error(f"{path}: the {what} file's header is not valid JSON; it is corrupt") from None
+    found = header.get("format") if isinstance(header, dict) else None
+    if found != format_name:
+        raise error(f"{path}: not a cogmap {what} file (format {found!r})")
+    if header.get("version") != version:
+        raise error(
+            f"{path}: {what} format version {header.get('version')!r} is not supported "
+            f"(this cogmap reads version {version}); {version_advice}"
+        )
+    return header, arrays

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import json
 import math
-import zipfile
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -48,7 +47,7 @@ from cogmap_core.clustering import Cluster, LoopClosureClusterer
 from cogmap_core.cognitive_map import CognitiveMap, MapCounters, MapMode, OptimizationRecord
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError, ParameterError
-from cogmap_core.fileio import atomic_writer
+from cogmap_core.fileio import atomic_writer, load_archive
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.frontend.local_view import MatchResult, ViewMatch
 from cogmap_core.frontend.pose_cells import _ViewCell
@@ -316,35 +315,15 @@ def load_session(path: Path | str) -> tuple[SlamSession, SessionMeta]:
 
     """
     path = Path(path)
-    if not path.is_file():
-        raise SessionError(f"{path}: no such session file; give the file --save-session wrote")
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if "header" not in data.files:
-                raise SessionError(f"{path}: not a cogmap session file (no header)")
-            arrays = {name: data[name] for name in data.files}
-    except SessionError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
-        raise SessionError(
-            f"{path}: not a readable cogmap session file ({type(exc).__name__}: "
-            f"{' '.join(str(exc).split())}); it is truncated or corrupt, use an intact copy"
-        ) from None
-    try:
-        header = json.loads(str(arrays.pop("header")))
-    except (json.JSONDecodeError, ValueError):
-        raise SessionError(
-            f"{path}: the session header is not valid JSON; the file is corrupt"
-        ) from None
-    if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
-        found = header.get("format") if isinstance(header, dict) else None
-        raise SessionError(f"{path}: not a cogmap session file (format {found!r})")
-    if header.get("version") != FORMAT_VERSION:
-        raise SessionError(
-            f"{path}: session format version {header.get('version')!r} is not supported "
-            f"(this cogmap reads version {FORMAT_VERSION}); resume it with the cogmap that wrote "
-            "it or start a new session"
-        )
+    header, arrays = load_archive(
+        path,
+        "session",
+        FORMAT_NAME,
+        FORMAT_VERSION,
+        SessionError,
+        advice="it is truncated or corrupt, use an intact copy",
+        version_advice="resume it with the cogmap that wrote it or start a new session",
+    )
     listed = header.get("arrays")
     if not isinstance(listed, dict) or set(listed) != set(arrays):
         raise SessionError(f"{path}: the session's arrays do not match its header; it is corrupt")

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cogmap_core.errors import InputFileError
+from cogmap_core.event_file import load_event_file, save_event_file
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.slam import EventLog
 
@@ -128,3 +132,59 @@ def test_link_scores_are_a_column() -> None:
     # columns without scores (an event file's) give links without scores
     columns = {k: v for k, v in log.columns().items() if k != "score"}
     assert EventLog.from_columns(columns, log.frame_end, log.frame_time).link_scores == [None] * 3
+
+
+# ------------------------------------------------------------------------------ event files
+def _rewrite(path: Path, target: Path, **changes: object) -> Path:
+    """A copy of the event file ``path`` with header fields or arrays changed."""
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    for name, value in changes.items():
+        arrays[name] = np.asarray(value)
+    np.savez(target, **arrays)
+    return target
+
+
+@pytest.fixture
+def event_file(tmp_path: Path) -> Path:
+    return save_event_file(tmp_path / "run.events.npz", build().recording("run.bag"))
+
+
+def test_event_file_round_trip(event_file: Path) -> None:
+    recording = load_event_file(event_file)
+    assert recording.events == all_events() and recording.source == "run.bag"
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        ("missing", "no such event file"),
+        ("truncated", "not a readable cogmap event file (BadZipFile: "),
+        ("header [1]", "not a cogmap event file (format None)"),
+        ("header not JSON", "the event file's header is not valid JSON; it is corrupt"),
+        ("version 99", "event format version 99 is not supported (this cogmap reads version 1)"),
+        ("no frames", "not a cogmap event file (missing frame_end)"),
+    ],
+)
+def test_a_damaged_event_file_is_one_line_naming_the_problem(
+    event_file: Path, tmp_path: Path, damage: str, message: str
+) -> None:
+    bad = tmp_path / "bad.npz"
+    header = json.loads(str(np.load(event_file)["header"]))
+    if damage == "missing":
+        bad = tmp_path / "nothing.npz"
+    elif damage == "truncated":
+        bad.write_bytes(event_file.read_bytes()[:100])
+    elif damage == "header [1]":
+        _rewrite(event_file, bad, header="[1]")
+    elif damage == "header not JSON":
+        _rewrite(event_file, bad, header="{not json")
+    elif damage == "version 99":
+        _rewrite(event_file, bad, header=json.dumps({**header, "version": 99}))
+    else:
+        with np.load(event_file) as data:
+            np.savez(bad, **{n: data[n] for n in data.files if n != "frame_end"})
+    with pytest.raises(InputFileError) as caught:
+        load_event_file(bad)
+    assert str(caught.value).startswith(f"{bad}: {message}")
+    assert "\n" not in str(caught.value)
