@@ -211,6 +211,16 @@ def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
             "--loops belongs to CSV logs",
         ),
         (
+            "typo in a measurement type after the sniffed lines' first",
+            [str(write(tmp / "i.txt", [*ODOM[:2], "odm2 0.2 0.5 0 0 0 0 0", *ODOM[3:]]))],
+            "i.txt:3: unknown measurement type 'odm2'",
+        ),
+        (
+            "relocalise that is not 0 or 1",
+            [str(square_log), "--frontend", "relocalise=nan"],
+            "log source setting relocalise=nan must be 0 or 1",
+        ),
+        (
             "unknown log setting",
             [str(square_log), "--frontend", "threshold=0.5"],
             "unknown log source setting(s) ['threshold']",

@@ -26,6 +26,7 @@ from cogmap_core.sources.odometry_log import (
     LogFormatError,
     OdometryLog,
     Rows,
+    is_number,
     make_odometry_log,
     read_log_text,
 )
@@ -41,14 +42,6 @@ def companion(path: Path, kind: str) -> Path | None:
 
 def _split(line: str) -> list[str]:
     return [field.strip() for field in line.split(",")]
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def looks_like_csv(first_line: str) -> bool:
@@ -74,7 +67,7 @@ def read_rows(path: Path, rows: Rows, widths: tuple[int, ...]) -> Rows:
         if not stripped or stripped.startswith("#"):
             continue
         fields = _split(stripped)
-        if first and not all(_is_number(f) for f in fields):
+        if first and not all(is_number(f) for f in fields):
             first = False
             if len(fields) not in widths:
                 raise LogFormatError(
@@ -91,7 +84,7 @@ def read_rows(path: Path, rows: Rows, widths: tuple[int, ...]) -> Rows:
         try:
             values = [float(f) for f in fields]
         except ValueError:
-            bad = next(f for f in fields if not _is_number(f))
+            bad = next(f for f in fields if not is_number(f))
             raise LogFormatError(
                 f"{path}:{line_no}: {bad!r} is not a number ({rows.what} columns {names})"
             ) from None

@@ -25,6 +25,7 @@ from cogmap_core.sources.odometry_log import (
     LogFormatError,
     OdometryLog,
     Rows,
+    is_number,
     make_odometry_log,
     read_log_text,
 )
@@ -35,8 +36,12 @@ TRUTH_FIELDS = {"point2": 7, "angle": 3}
 
 
 def looks_like_tuc(first_words: list[str]) -> bool:
-    """Whether the first words of a file's lines are TUC measurement types."""
-    return bool(first_words) and all(w in INPUT_FIELDS or w in TRUTH_FIELDS for w in first_words)
+    """Whether a file's first data line starts with a TUC measurement type.
+
+    Only the first line decides: a later line with an unknown type is then reported by the
+    reader with its line number, not as a file of no known format.
+    """
+    return bool(first_words) and (first_words[0] in INPUT_FIELDS or first_words[0] in TRUTH_FIELDS)
 
 
 def ground_truth_companion(path: Path) -> Path | None:
@@ -58,18 +63,10 @@ def _numbers(path: Path, line_no: int, words: list[str], expected: int) -> list[
     try:
         return [float(w) for w in words[1:]]
     except ValueError:
-        bad = next(w for w in words[1:] if not _is_float(w))
+        bad = next(w for w in words[1:] if not is_number(w))
         raise LogFormatError(
             f"{path}:{line_no}: {bad!r} in a '{kind}' line is not a number; fix or drop the line"
         ) from None
-
-
-def _is_float(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def _lines(path: Path) -> list[tuple[int, list[str]]]:

@@ -119,6 +119,15 @@ class LogFormatError(InputFileError):
     """A log file has a malformed line or values that break the log's rules (file:line named)."""
 
 
+def is_number(text: str) -> bool:
+    """Whether ``text`` reads as a float (the log readers' test of a field)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def read_log_text(path: Path, expected: str) -> str:
     """The text of a log file; ``expected`` says what its lines should be (for the messages).
 
@@ -184,6 +193,9 @@ class LogSourceConfig:
             raise ParameterError(
                 f"unknown log source setting(s) {sorted(unknown)}; known: {sorted(known)}"
             )
+        relocalise = changes.get("relocalise")
+        if relocalise is not None and relocalise not in (0, 1):  # (True and False are 1 and 0)
+            raise ParameterError(f"log source setting relocalise={relocalise!r} must be 0 or 1")
         values = {k: bool(v) if k == "relocalise" else float(v) for k, v in changes.items()}
         return replace(self, **values)  # type: ignore[arg-type]
 
