@@ -167,12 +167,8 @@ def input_kind(args: argparse.Namespace, path: Path) -> InputKind:
 
 def log_options_from_args(args: argparse.Namespace) -> LogOptions:
     """How to read a log: ``--frontend`` overrides of its settings and its companion files."""
-    try:
-        config = LogSourceConfig().with_changes(**_overrides(args.frontend))
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f"--frontend: {exc}") from None
     return LogOptions(
-        config=config,
+        config=LogSourceConfig().with_changes(**_overrides(args.frontend)),
         loops=None if args.loops is None else Path(args.loops),
         ground_truth=None if args.ground_truth is None else Path(args.ground_truth),
         use_ground_truth=not args.no_ground_truth,

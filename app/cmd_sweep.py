@@ -65,10 +65,7 @@ def read_spec_file(path: Path) -> dict[str, Any]:
             raise InputFileError(f"{path}: spec files are .toml, .yaml, .yml or .json")
     except InputFileError:
         raise
-    except (OSError, UnicodeDecodeError, ValueError) as exc:  # TOML, YAML and JSON errors
-        message = " ".join(str(exc).split())
-        raise InputFileError(f"{path}: not a readable spec file ({message})") from None
-    except Exception as exc:  # yaml.YAMLError is not a ValueError
+    except Exception as exc:  # OSError, and TOML, YAML (not a ValueError) and JSON errors
         message = " ".join(str(exc).split())
         raise InputFileError(f"{path}: not a readable spec file ({message})") from None
     if not isinstance(data, dict):
