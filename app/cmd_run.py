@@ -19,7 +19,6 @@ from app.cli_common import (
     input_kind,
     log_options_from_args,
     map_changes_from_args,
-    params_from_args,
     resolve_bag,
     topics_from_args,
 )
@@ -37,7 +36,7 @@ def _run(args: argparse.Namespace) -> int:
     kind = input_kind(args, bag)
     camera = kind.has_camera
     options = RunOptions(
-        params=params_from_args(args, kind.map_params),  # the input kind's defaults + options
+        params=kind.map_params.with_changes(**changes),  # the input kind's defaults + options
         frontend=frontend_from_args(args, bag) if camera else None,
         topics=topics_from_args(args),
         force=args.force,

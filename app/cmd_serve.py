@@ -21,7 +21,6 @@ from app.cli_common import (
     input_kind,
     log_options_from_args,
     map_changes_from_args,
-    params_from_args,
     topics_from_args,
 )
 from app.server.replay import BagSource, GenerationProgress
@@ -66,7 +65,7 @@ def display_url(host: str, port: int) -> str:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    map_changes_from_args(args)  # validate before starting anything
+    changes = map_changes_from_args(args)  # read and validated once, before anything starts
     topics = topics_from_args(args)
     if args.bag is None:
         kind = KINDS["bag"]  # the built-in dataset
@@ -76,7 +75,7 @@ def _serve(args: argparse.Namespace) -> int:
         kind = input_kind(args, Path(args.bag))
     else:
         kind = KINDS["bag"]  # a missing file is reported on the page, as for any bag
-    params = params_from_args(args, kind.map_params)
+    params = kind.map_params.with_changes(**changes)
     if kind.has_camera:
         frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile)
         log = None
@@ -98,9 +97,7 @@ def _serve(args: argparse.Namespace) -> int:
         bag_path = Path(args.bag)
         if not bag_path.exists():
             raise InputFileError(f"{bag_path}: no such bag; give an existing .bag file")
-        resume = resume_session(
-            args.resume, frontend_from_args(args, bag_path), 4, map_changes_from_args(args)
-        )
+        resume = resume_session(args.resume, frontend_from_args(args, bag_path), 4, changes)
         print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     import viser
 
