@@ -304,6 +304,28 @@ def prepare_events(
     )
 
 
+def cached_bag_events(path: Path, say: Callable[[str], None] | None = None) -> EventRecording:
+    """A bag's front-end events (its profile's settings) from the user-wide cache.
+
+    The cache sweeps fill (``$COGMAP_CACHE/events``, keyed by the bag's name, size, time and
+    the front-end settings); the front end runs once when the bag is not in it. A damaged
+    cached copy is recorded again.
+    """
+    from cogmap_core.datasets.profile import frontend_config_for
+
+    source = bag_source(path, frontend_config_for(path), BagTopics())
+    cached = shared_events_dir() / source.events_name
+    if cached.exists():
+        with contextlib.suppress(InputFileError):
+            return load_event_file(cached)
+    if say is not None:
+        say(f"{source.label}: running the front end once (events cached in {cached})")
+    recording = _record(source, None)
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    save_event_file(cached, recording)
+    return recording
+
+
 def _record(source: BagSource, progress: FrameProgress | None) -> EventRecording:
     """Run the front end over the bag; return its :class:`EventRecording`."""
     assert source.frontend is not None
@@ -669,7 +691,8 @@ def _import_distributed() -> Any:
         import distributed
     except ImportError:
         raise SweepError(
-            "cogmap sweep runs on Dask, which is not installed: pip install 'cogmap[sweep]'"
+            "cogmap sweep runs on Dask, which is not installed: pip install '.[sweep]' in "
+            "cogmap's folder"
         ) from None
     return distributed
 
@@ -781,7 +804,7 @@ def _worker_reports(client: Any, paths: Sequence[str]) -> dict[str, dict[str, An
     except Exception as exc:
         raise SweepError(
             f"the Dask workers cannot run cogmap ({type(exc).__name__}: "
-            f"{' '.join(str(exc).split())}); pip install 'cogmap[sweep]=={__version__}' on "
+            f"{' '.join(str(exc).split())}); pip install '.[sweep]' of cogmap {__version__} on "
             "every worker"
         ) from None
 

@@ -14,7 +14,7 @@ are built from the events with the paper's parameters and every figure is printe
   ``cogmap_core.evaluation.size_change`` -- and raw; also from the start of lap 3 ("2..6");
 - map build time as a realtime factor (data seconds per wall second, maps only) and, from the
   front end's run, the whole pipeline's;
-- loop-closure precision (position within 0.1 m and heading within 20 degrees).
+- loop-closure precision (position within 0.1 m and heading within 10 degrees).
 
 Targets (issue "Maps that keep the layout"): standard edges per vertex <= 1.5, standard
 completeness and correctness >= 0.99; scene_integration and compact completeness and
@@ -29,22 +29,19 @@ Usage: ``python benchmarks/map_layouts.py [--layouts a,b,...] [--radius 0.08] [-
 from __future__ import annotations
 
 import argparse
-import hashlib
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from app.sweep import cached_bag_events
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import open_bag
 from cogmap_core.datasets.cache import DATASET_VERSION, cache_dir, default_dataset_path
 from cogmap_core.datasets.generator import MazeConfig, generate_maze_bag, plan_dataset
-from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.event_file import EventRecording, load_event_file, save_event_file
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.event_file import EventRecording
+from cogmap_core.slam import EventLog
 
 LAYOUTS = ("irat_australia", "figure_eight", "long_corridors", "junction_dead_end")
 MODES = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
@@ -74,23 +71,9 @@ def bag_for(layout: str) -> Path:
 
 
 def events_for(bag: Path) -> tuple[EventRecording, float]:
-    """The front end's events of a bag (cached beside it, keyed by the front-end settings)."""
-    frontend = frontend_config_for(bag)
-    key = hashlib.sha1(json.dumps(frontend.to_dict(), sort_keys=True).encode()).hexdigest()[:10]
-    path = bag.with_name(f"{bag.stem}.events-{key}.npz")
-    if path.exists():
-        recording = load_event_file(path)
-        return recording, float(recording.meta.get("frontend_wall_s", float("nan")))
-    session = SlamSession(frontend_config=frontend, modes=())
-    started = time.perf_counter()
-    with open_bag(bag, image_scale=4) as reader:
-        for frame in reader.frames():
-            session.process(frame)
-    wall = time.perf_counter() - started
-    recording = session.log.recording(str(bag), frontend.to_dict())
-    recording.meta["frontend_wall_s"] = wall
-    save_event_file(path, recording)
-    return recording, wall
+    """The front end's events of a bag (the user-wide event cache) and the front end's time."""
+    recording = cached_bag_events(bag, print)
+    return recording, float(recording.meta.get("frontend_wall_s", float("nan")))
 
 
 def load_dataset(layout: str) -> Dataset:

@@ -25,9 +25,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import hashlib
 import io
-import json
 import math
 import os
 import statistics
@@ -42,12 +40,10 @@ import viser  # noqa: E402
 from app.cli_common import resolve_bag  # noqa: E402
 from app.server.app import CogmapApp  # noqa: E402
 from app.server.replay import PlaybackState, RebuildRecord  # noqa: E402
+from app.sweep import cached_bag_events  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
-from cogmap_core.datasets import open_bag  # noqa: E402
-from cogmap_core.datasets.profile import frontend_config_for  # noqa: E402
-from cogmap_core.event_file import EventRecording, load_event_file, save_event_file  # noqa: E402
-from cogmap_core.slam import EventLog, SlamSession  # noqa: E402
+from cogmap_core.slam import EventLog  # noqa: E402
 
 TARGET_S = 0.200
 LONG_TARGET_S = 0.500
@@ -64,31 +60,9 @@ VALUES: dict[str, tuple[float, ...]] = {
 SHORT = {"alpha": "α", "beta": "β", "delta": "δ", "t_interval": "T_interval", "t_total": "T_total"}
 
 
-def events_for(bag: Path) -> EventRecording:
-    """The front end's events of ``bag``: the event file beside it (made once if missing)."""
-    frontend = frontend_config_for(bag)
-    key = hashlib.sha1(json.dumps(frontend.to_dict(), sort_keys=True).encode()).hexdigest()[:10]
-    candidates = (f"{bag.stem}.events-{key}.npz", f"{bag.stem}.events.npz")
-    for path in (bag.with_name(name) for name in candidates):
-        if path.exists():
-            recording = load_event_file(path)
-            if recording.frontend and recording.frontend != frontend.to_dict():
-                continue  # made with other front-end settings
-            return recording
-    path = bag.with_name(f"{bag.stem}.events-{key}.npz")
-    print(f"running the front end over {bag.name} once (events cached in {path.name}) ...")
-    session = SlamSession(frontend_config=frontend, modes=())
-    with open_bag(bag, image_scale=4) as reader:
-        for frame in reader.frames():
-            session.process(frame)
-    recording = session.log.recording(str(bag), frontend.to_dict())
-    save_event_file(path, recording)
-    return recording
-
-
 def loaded_app(bag: Path, port: int) -> tuple[CogmapApp, viser.ViserServer]:
     """The app with the bag's events in its replay cache, at the end of the data, paused."""
-    recording = events_for(bag)
+    recording = cached_bag_events(bag, print)
     with contextlib.redirect_stdout(io.StringIO()):
         server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
     app = CogmapApp(server, bag, speed=math.inf, autoplay=False)
