@@ -305,6 +305,9 @@ def main() -> int:
     )
     laps = len(lap_times) - 1
     first_lap = min(3, laps)
+    dead_reckoning = log.dead_reckoning_ate()
+    if dead_reckoning is not None:
+        print(f"dead-reckoning ATE {dead_reckoning:.3f} m (the baseline of the maps' ATE)")
     changes = {}
     for mode in MODES:
         cmap = run.session.maps[mode]
@@ -313,13 +316,15 @@ def main() -> int:
         assert change is not None and fidelity is not None
         changes[mode] = change
         optimise_s = sum(o.wall_s for o in cmap.optimizations)
+        ate = log.map_ate(cmap)
         print(
             f"  {mode.value:18} V {cmap.num_vertices:5d} E {cmap.num_edges:5d}; end of lap "
             f"{first_lap} to {laps}: {change.start_vertices} -> {change.end_vertices} vertices, "
             f"{change.change:+.1%} ({change.change_without_exploration:+.1%} without the "
             f"{change.exploration_vertices} made on ground first explored then); completeness "
-            f"{fidelity.completeness:.4f}, correctness {fidelity.correctness:.4f}; "
-            f"{len(cmap.optimizations)} optimisations, {optimise_s:.1f} s"
+            f"{fidelity.completeness:.4f}, correctness {fidelity.correctness:.4f}"
+            + ("" if ate is None else f", ATE {ate:.4f} m")
+            + f"; {len(cmap.optimizations)} optimisations, {optimise_s:.1f} s"
         )
     print(
         f"session: saved in {run.save_s:.2f} s, loaded in {run.load_s:.2f} s, "
