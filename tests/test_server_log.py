@@ -6,14 +6,18 @@ import bisect
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from app.cli import main
+from app.server import export
 from app.server.app import CogmapApp, recent_links
 from app.server.export import summary_dict
+from app.server.figures import false_link_label, layout_radius_label
 from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import MapMode
-from cogmap_core.slam import SlamSession
+from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.slam import EventLog, SlamSession
 from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
 from tests.test_log_cli import square_run
@@ -101,3 +105,24 @@ def test_serve_refuses_a_bad_log_before_starting(tmp_path: Path, capsys) -> None
     odometry.write_text("0,1,0\n")
     assert main(["serve", str(odometry), "--frontend", "score_threshold=2"]) == 2
     assert "score_threshold=2.0 is out of range" in capsys.readouterr().err
+
+
+def test_the_page_and_the_replay_judge_a_log_with_its_own_tolerances(
+    square_log: Path, reference: SlamSession, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    assert layout_radius_label(reference.evaluation) == "50 cm"
+    assert false_link_label(reference.evaluation) == "position 1 m"
+    assert layout_radius_label(EvaluationSettings()) == "8 cm"
+    assert false_link_label(EvaluationSettings()) == "position 0.1 m, heading 10°"
+    judged: list[EvaluationSettings | None] = []
+    real = export.false_link_times
+
+    def spy(log: EventLog, judging: EvaluationSettings | None = None) -> np.ndarray:
+        judged.append(judging)
+        return real(log, judging)
+
+    monkeypatch.setattr(export, "false_link_times", spy)
+    with running_app(square_log, params=LOG_MAP_PARAMS, defaults=LOG_MAP_PARAMS) as app:
+        wait(app)
+        export.save_html_replay(app.replay, (MapMode.COMPACT,), tmp_path / "r.html", 3, 0.1)
+    assert judged == [reference.evaluation]

@@ -41,7 +41,7 @@ from app.server.export import (
     sizes_csv_bytes,
     summary_bytes,
 )
-from app.server.figures import MapFigures, false_link_times, map_figures
+from app.server.figures import MapFigures, false_link_times, layout_radius_label, map_figures
 from app.server.params import (
     ADVANCED_SLIDERS,
     ALL_SLIDERS,
@@ -983,7 +983,7 @@ class CogmapApp:
             for key, label, value in rows
         )
         figures = {m: self.map_figures(m, session.maps[m]) for m in ALL_MODES}
-        radius = f"{session.evaluation.layout_radius * 100:g} cm"  # the input kind's
+        radius = layout_radius_label(session.evaluation)  # the input kind's
         sections = (
             (
                 "size",

@@ -29,6 +29,7 @@ from app.server.scene import MapExtras, SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
+from cogmap_core.evaluation import EvaluationSettings
 from cogmap_core.events import MapEvent, Odometry
 from cogmap_core.fileio import check_writable, output_error, write_text_atomic
 from cogmap_core.g2o import format_g2o
@@ -173,13 +174,16 @@ def html_replay(
     seconds: float = REPLAY_SECONDS,
     bag: str = "",
     static_dir: Path | None = None,
+    judging: EvaluationSettings | None = None,
 ) -> str:
     """A self-contained HTML page replaying the maps ``modes`` built from ``log``.
 
     The events are applied to fresh maps with ``params``; after every key frame the scene is
     updated incrementally on a private viser server, whose serializer records it with a pause,
     so that the whole session plays in about ``seconds``. The ground truth is aligned to each
-    map as on the page; a caption names the maps, the bag and the parameters.
+    map as on the page, and the false loop closures are marked with the page's tolerances
+    (``judging``, the input kind's; default a bag's); a caption names the maps, the bag and the
+    parameters.
     """
     modes = tuple(modes)
     with _quiet():
@@ -198,7 +202,7 @@ def html_replay(
         step = max(1, math.ceil(n / max(1, keyframes)))
         pause = seconds / max(1, math.ceil(n / step))
         truth = log.ground_truth if log.has_ground_truth() else None
-        false_times = false_link_times(log)
+        false_times = false_link_times(log, judging)
         done = 0
         for k in range(step, n + step, step):
             k = min(k, n)
@@ -248,6 +252,7 @@ def save_html_replay(
     with replay.lock:
         log = replay.session.log.truncated(replay.cursor)
         params = replay.session.params
+        judging = replay.session.evaluation
         finish = replay.at_end
     if log.frames == 0:
         raise InputFileError("nothing replayed yet: play some frames before saving a replay")
@@ -257,7 +262,7 @@ def save_html_replay(
         raise output_error(path.parent, exc, "create") from None
     check_writable(path.parent)
     bag = replay.bag_path.name if replay.bag_path is not None else ""
-    page = html_replay(log, params, modes, finish, keyframes, seconds, bag, static_dir)
+    page = html_replay(log, params, modes, finish, keyframes, seconds, bag, static_dir, judging)
     try:
         write_text_atomic(path, page)
     except OSError as exc:

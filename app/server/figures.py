@@ -57,6 +57,19 @@ def map_figures(
     )
 
 
+def layout_radius_label(judging: EvaluationSettings) -> str:
+    """The layout fidelity radius as the page writes it ("8 cm", "50 cm")."""
+    return f"{judging.layout_radius * 100:g} cm"
+
+
+def false_link_label(judging: EvaluationSettings) -> str:
+    """When a loop closure counts as false, as the page writes it."""
+    text = f"position {judging.loop_distance:g} m"
+    if judging.loop_heading is not None:
+        text += f", heading {math.degrees(judging.loop_heading):.0f}°"
+    return text
+
+
 def false_link_times(log: EventLog, judging: EvaluationSettings | None = None) -> FloatArray:
     """Times of the links the ground truth calls false (with ``judging``'s tolerances).
 

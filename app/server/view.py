@@ -29,6 +29,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from app.server.figures import false_link_label, layout_radius_label
 from app.server.params import ALL_SLIDERS, format_value
 from app.server.scene import (
     COLOURINGS,
@@ -363,8 +364,8 @@ class ClientView:
                 f'style="background:{ERROR_RAMP_CSS}"></span> ≥ {ERROR_SCALE_MAX:g} σ'
             )
         parts.append(
-            f"{swatch(FALSE_LOOP_COLOR)}loop closures the ground truth calls false (position "
-            "0.1 m, heading 10°)"
+            f"{swatch(FALSE_LOOP_COLOR)}loop closures the ground truth calls false "
+            f"({false_link_label(self.app.replay.session.evaluation)})"
         )
         parts.append(
             f"{swatch(GROUND_TRUTH_COLOR)}ground truth, aligned to each map by the rigid "
@@ -633,13 +634,14 @@ class ClientView:
                 f"<td{cls}>{format_value(b)}</td></tr>"
             )
         rows.append('<tr class="cogmap-section"><td colspan="3">figures</td></tr>')
+        radius = layout_radius_label(self.app.replay.session.evaluation)
         for key, label in (
             ("vertices", "vertices"),
             ("edges", "edges"),
             ("loops", "loop-closure edges"),
             ("ate", "ATE (m)"),
-            ("completeness", "completeness (8 cm)"),
-            ("correctness", "correctness (8 cm)"),
+            ("completeness", f"completeness ({radius})"),
+            ("correctness", f"correctness ({radius})"),
         ):
             rows.append(
                 f'<tr><td>{label}</td><td id="cogmap-compare-live-{key}">{live[key]}</td>'
