@@ -169,6 +169,12 @@ def write(path: Path, lines: list[str]) -> Path:
 ODOM = [f"odom2 {k / 10:.1f} 0.5 0 0 0 0 0" for k in range(50)]
 
 
+def _binary(path: Path) -> Path:
+    """A file that starts like a TUC log and then holds bytes that are not UTF-8."""
+    path.write_bytes(b"odom2 0 0 0 0 0.1 0.1 0.1\n\xff\xfe\x00 binary\n")
+    return path
+
+
 def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
     """(case, arguments after 'run FILE --out DIR' prefix, expected message part)."""
     partial = write(tmp / "partial_GT.txt", [f"point2 {k} 0 0 0 0 0 0" for k in range(3)])
@@ -224,6 +230,22 @@ def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
             "unknown log setting",
             [str(square_log), "--frontend", "threshold=0.5"],
             "unknown log source setting(s) ['threshold']",
+        ),
+        (
+            "a binary file read with --format",
+            [str(_binary(tmp / "j.txt")), "--format", "tuc"],
+            "j.txt: not a text file; expected TUC measurement lines",
+        ),
+        (
+            "a --loops file that does not exist",
+            [str(write(tmp / "k_odometry.csv", ["time,v,omega", "0,0,0", "1,0.1,0"]))]
+            + ["--loops", str(tmp / "missing_loops.csv")],
+            "missing_loops.csv: no such file",
+        ),
+        (
+            "a --params file that is not JSON",
+            [str(write(tmp / "l.txt", ODOM)), "--params", str(write(tmp / "p.json", ["{bad"]))],
+            "p.json: not a readable JSON file",
         ),
         (
             "partial ground truth is only a warning",
