@@ -24,6 +24,7 @@ from websockets.sync.client import ClientConnection, connect
 
 from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
 from app.server.export import g2o_bytes, save_html_replay, summary_dict
+from app.server.figures import truth_transform
 from app.server.replay import PARAMS_USED, PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -83,6 +84,11 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
         fidelity = reference.layout_fidelity(compact)
         assert counter(app, "compact-completeness") == f"{fidelity.completeness:.3f}"
         assert counter(app, "compact-correctness") == f"{fidelity.correctness:.3f}"
+        for mode in MapMode:  # the page's figures are the report's, to the last bit
+            figures, cmap = app._figures[mode], reference.maps[mode]
+            assert figures.ate == reference.ate(cmap)
+            assert figures.fidelity == reference.layout_fidelity(cmap)
+            assert figures.truth_transform == truth_transform(reference.log, cmap)
         links = sum(1 for e in reference.log.events if type(e).__name__ == "LinkToVertex")
         assert counter(app, "loops-detected") == str(links)
         score = reference.loop_closure_score()

@@ -372,6 +372,8 @@ def test_open_another_bag_from_the_page(
         app.open_button.value = True
         assert f"opened {other}" in html.unescape(app.open_md.content)
         assert app.replay is not first and not first.alive
+        # readers that took `app.replay.lock` before the swap held the new replay's lock too
+        assert app.replay.lock is first.lock
         wait(app)
         assert app.replay.bag_path == other and app.replay.state is PlaybackState.ENDED
         for mode in MapMode:

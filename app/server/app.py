@@ -41,7 +41,14 @@ from app.server.export import (
     sizes_csv_bytes,
     summary_bytes,
 )
-from app.server.figures import MapFigures, false_link_times, layout_radius_label, map_figures
+from app.server.figures import (
+    FigureInputs,
+    MapFigures,
+    compute_figures,
+    false_link_times,
+    figure_inputs,
+    layout_radius_label,
+)
 from app.server.params import (
     ADVANCED_SLIDERS,
     ALL_SLIDERS,
@@ -215,6 +222,9 @@ class CogmapApp:
         self._autoplay = autoplay
         self._waiting_for_viewer = autoplay and wait_for_viewer
         self._switch_lock = threading.Lock()
+        # one lock for every replay this app makes: `with self.replay.lock` stays right while
+        # open_bag swaps self.replay (the swap happens under it)
+        self._replay_lock = threading.RLock()
         self._connect_lock = threading.Lock()
         self._figures_cond = threading.Condition()
         self._figures_todo: set[MapMode] = set()
@@ -257,6 +267,7 @@ class CogmapApp:
             fmt=fmt,
             log=log,
             resume=resume,
+            lock=self._replay_lock,
         )
 
     def _defaults_name(self) -> str:
@@ -816,30 +827,44 @@ class CogmapApp:
                     self._figures_busy = False
 
     def _compute_figures(self, modes: list[MapMode]) -> None:
+        """Compute the figures of ``modes`` that changed, holding the replay lock only to copy.
+
+        The computation (some 30 ms per map) runs without the lock, so playback and rebuilds
+        do not wait for it; figures of a replay that was swapped for another bag meanwhile, or
+        of a map that changed meanwhile, are dropped (the next round computes them again).
+        """
         replay = self.replay
-        changed = False
+        todo: list[tuple[MapMode, tuple[int, ...], FigureInputs]] = []
         with replay.lock:
+            if replay is not self.replay:
+                return
             log_ = replay.session.log
+            judging = replay.session.evaluation
             key = (id(log_), log_.frames)
-            if key != self._false_key:
+            changed = key != self._false_key
+            if changed:
                 self._false_key = key
-                self._false_times = false_link_times(log_, replay.session.evaluation)
-                changed = True
+                self._false_times = false_link_times(log_, judging)
             for mode in modes:
                 cmap = replay.session.maps[mode]
                 mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
                         log_.frames)  # fmt: skip
-                if self._figures_key.get(mode) == mkey:
-                    continue
-                figures = map_figures(log_, cmap, replay.session.evaluation)
-                with self.scene_lock:
-                    self._figures_key[mode] = mkey
-                    self._figures[mode] = figures
-                    self.stats_version += 1
-                changed = True
+                if self._figures_key.get(mode) != mkey:
+                    todo.append((mode, mkey, figure_inputs(log_, cmap)))
+        for mode, mkey, inputs in todo:
+            figures = compute_figures(inputs, judging)
+            with replay.lock, self.scene_lock:
+                if replay is not self.replay:
+                    return
+                self._figures_key[mode] = mkey
+                self._figures[mode] = figures
+                self.stats_version += 1
+            changed = True
         if not changed:
             return
         with replay.lock, self.scene_lock:
+            if replay is not self.replay:
+                return
             self._publish_scene()  # the truth's alignment, the false loop closures
             self._update_counters()
             for view in list(self.views.values()):
@@ -1186,8 +1211,8 @@ class CogmapApp:
             old = self.replay
             params = old.params
             speed = old.speed
-            old.stop()
-            with self.scene_lock:
+            old.stop()  # joins its worker, which may be waiting for the replay lock
+            with self._replay_lock, self.scene_lock:
                 self.streamer.reset()
                 self._figures.clear()
                 self._figures_key.clear()

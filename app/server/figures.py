@@ -13,7 +13,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap
-from cogmap_core.evaluation import EvaluationSettings, LayoutFidelity, align_rigid_2d
+from cogmap_core.evaluation import (
+    EvaluationSettings,
+    LayoutFidelity,
+    absolute_trajectory_error,
+    align_rigid_2d,
+    layout_fidelity,
+)
+from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.slam import EventLog
 
 FloatArray = NDArray[np.float64]
@@ -28,33 +35,72 @@ class MapFigures:
     truth_transform: tuple[float, float, float] | None
 
 
+@dataclass(frozen=True, slots=True)
+class FigureInputs:
+    """What a map's figures are computed from, copied out of a running replay.
+
+    Taken while the replay's lock is held (:func:`figure_inputs`, a few milliseconds); the
+    figures are then computed from it without the lock (:func:`compute_figures`), so the replay
+    does not wait for them.
+
+    Attributes:
+        map: the map's live part.
+        vertex_truth: the true pose at each vertex's creation time (None without truth).
+        path: the dense true path, one pose per frame (None without truth).
+
+    """
+
+    map: MapSnapshot
+    vertex_truth: FloatArray | None
+    path: FloatArray | None
+
+
+def figure_inputs(log: EventLog, cmap: CognitiveMap) -> FigureInputs:
+    """Copy what the figures of ``cmap`` need (hold the replay's lock while calling)."""
+    snap = cmap.snapshot()
+    if not log.has_ground_truth():
+        return FigureInputs(snap, None, None)
+    return FigureInputs(snap, log.truth_at(snap.vertex_time), np.array(log.ground_truth))
+
+
+def compute_figures(inputs: FigureInputs, judging: EvaluationSettings | None = None) -> MapFigures:
+    """ATE, layout fidelity (at ``judging``'s radius) and the truth's alignment of a map.
+
+    The same computations as ``cogmap run``'s report (:class:`~cogmap_core.slam.EventLog`).
+    """
+    snap, truth, path = inputs.map, inputs.vertex_truth, inputs.path
+    if truth is None or path is None:
+        return MapFigures(None, None, None)
+    radius = (judging or EvaluationSettings()).layout_radius
+    n = snap.vertex_ids.shape[0]
+    ate = absolute_trajectory_error(snap.poses, truth) if n else None
+    index = np.searchsorted(snap.vertex_ids, np.r_[snap.edge_from, snap.edge_to])
+    m = snap.edge_from.shape[0]
+    fidelity = layout_fidelity(snap.poses, truth, index[:m], index[m:], path, radius)
+    return MapFigures(ate, fidelity, _alignment(snap, truth, path))
+
+
+def _alignment(
+    snap: MapSnapshot, truth: FloatArray, path: FloatArray
+) -> tuple[float, float, float]:
+    if snap.vertex_ids.shape[0] >= 2:
+        t = align_rigid_2d(truth, snap.poses)
+        return (t.theta, t.tx, t.ty)
+    x0, y0, theta0 = path[0]
+    c, s = math.cos(-theta0), math.sin(-theta0)
+    return (-theta0, -(c * x0 - s * y0), -(s * x0 + c * y0))
+
+
 def truth_transform(log: EventLog, cmap: CognitiveMap) -> tuple[float, float, float] | None:
     """(theta, tx, ty) taking the ground truth onto the map: the rigid alignment of the ATE.
 
     With fewer than two vertices, the truth is placed so that its first pose is the map's
     origin (where the first vertex is made). None without ground truth.
     """
-    if not log.has_ground_truth():
+    inputs = figure_inputs(log, cmap)
+    if inputs.vertex_truth is None or inputs.path is None:
         return None
-    snap = cmap.snapshot()
-    if snap.vertex_ids.shape[0] >= 2:
-        truth = log.truth_at(snap.vertex_time)
-        assert truth is not None
-        t = align_rigid_2d(truth, snap.poses)
-        return (t.theta, t.tx, t.ty)
-    x0, y0, theta0 = log.ground_truth[0]
-    c, s = math.cos(-theta0), math.sin(-theta0)
-    return (-theta0, -(c * x0 - s * y0), -(s * x0 + c * y0))
-
-
-def map_figures(
-    log: EventLog, cmap: CognitiveMap, judging: EvaluationSettings | None = None
-) -> MapFigures:
-    """ATE, layout fidelity (at ``judging``'s radius) and the truth's alignment of ``cmap``."""
-    radius = (judging or EvaluationSettings()).layout_radius
-    return MapFigures(
-        log.map_ate(cmap), log.layout_fidelity(cmap, radius), truth_transform(log, cmap)
-    )
+    return _alignment(inputs.map, inputs.vertex_truth, inputs.path)
 
 
 def layout_radius_label(judging: EvaluationSettings) -> str:

@@ -209,8 +209,14 @@ class Replay:
         fmt: str | None = None,
         log: LogOptions | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
+        lock: threading.RLock | None = None,
     ) -> None:
-        """Set up the replay (nothing is read until :meth:`start`)."""
+        """Set up the replay (nothing is read until :meth:`start`).
+
+        ``lock`` guards the worker-owned state; an app that swaps replays passes one lock to
+        all of them, so a reader that took ``app.replay.lock`` holds the lock of the replay it
+        then finds in ``app.replay``.
+        """
         self.bag_source = bag
         self.format = fmt
         self.log_options = log or LogOptions()
@@ -222,7 +228,7 @@ class Replay:
         )
         self.topics = topics
         self.image_scale = image_scale
-        self.lock = threading.RLock()
+        self.lock = lock if lock is not None else threading.RLock()
         self._cond = threading.Condition()
         self._thread: threading.Thread | None = None
         # requests (guarded by _cond)
