@@ -40,9 +40,15 @@ from cogmap_core.config import MapParams
 from cogmap_core.evaluation import absolute_trajectory_error, dead_reckoning
 from cogmap_core.slam import SlamSession
 from cogmap_core.sources.detect import LogOptions, open_source
-from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogReader, LogSourceConfig
+from cogmap_core.sources.odometry_log import (
+    LOG_EVALUATION,
+    LOG_MAP_PARAMS,
+    LogReader,
+    LogSourceConfig,
+)
 
-RADIUS = 0.5
+RADIUS = LOG_EVALUATION.layout_radius
+"""Layout fidelity and growth are judged at the input kind's radius (0.5 m)."""
 GATE = {"gate_position": 1.0, "gate_heading": 1e9, "gate_drift_position": 0.1}
 """The relocalisation test for this odometry: 1 m (the true-link tolerance) plus 10 cm per metre
 of map path (its dead reckoning drifts 3-7 % of the distance, more in turns); heading unchecked
@@ -65,7 +71,7 @@ def raw_dead_reckoning_ate(reader: LogReader) -> float:
     assert log.ground_truth is not None
     odo = log.odometry
     dt = np.diff(odo[:, 0], prepend=odo[0, 0])
-    poses = dead_reckoning(odo[:, 0], odo[:, 1] * dt, odo[:, 2] * dt)
+    poses = dead_reckoning(odo[:, 1] * dt, odo[:, 2] * dt)
     gt = log.ground_truth
     truth = np.column_stack([np.interp(odo[:, 0], gt[:, 0], gt[:, k]) for k in (1, 2)])
     return absolute_trajectory_error(poses, truth)

@@ -166,12 +166,11 @@ def score_loop_closures(
     return LoopClosureScore(n, true, len(false), false, position_error, heading_error)
 
 
-def dead_reckoning(times: FloatArray, translation: FloatArray, rotation: FloatArray) -> FloatArray:
+def dead_reckoning(translation: FloatArray, rotation: FloatArray) -> FloatArray:
     """Integrate odometry alone (rotate, then translate along the new heading) from the origin.
 
     Returns ``(N, 3)`` poses after each step, the way the cognitive map integrates odometry.
     """
-    del times  # the poses follow the steps; times only label them
     theta = np.cumsum(np.asarray(rotation, dtype=np.float64))
     step = np.asarray(translation, dtype=np.float64)
     poses = np.empty((step.shape[0], 3))

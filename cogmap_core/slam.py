@@ -388,10 +388,11 @@ class EventLog:
 
     def map_ate(self, cmap: CognitiveMap) -> float | None:
         """RMSE of a map's vertex positions against ground truth after rigid alignment (m)."""
-        truth = self.vertex_ground_truth(cmap)
-        if truth is None or cmap.num_vertices == 0:
+        if cmap.num_vertices == 0:
             return None
-        return absolute_trajectory_error(cmap.snapshot().poses, truth)
+        snap = cmap.snapshot()
+        truth = self.truth_at(snap.vertex_time)
+        return None if truth is None else absolute_trajectory_error(snap.poses, truth)
 
     def dead_reckoning(self) -> FloatArray:
         """``(F, 3)`` pose after each frame from the odometry events alone (from the origin)."""
@@ -402,7 +403,6 @@ class EventLog:
         if not is_odometry.any():
             return out
         poses = dead_reckoning(
-            self._time[: self._n_events][is_odometry],
             self._value0[: self._n_events][is_odometry],
             self._value1[: self._n_events][is_odometry],
         )
