@@ -12,7 +12,14 @@ from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.frontend import FrontEndConfig
-from cogmap_core.sources.detect import FORMATS, KINDS, InputKind, LogOptions, resolve_format
+from cogmap_core.sources.detect import (
+    FORMATS,
+    KINDS,
+    InputKind,
+    LogOptions,
+    check_companions,
+    resolve_format,
+)
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
 
 
@@ -156,13 +163,9 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
 
 def input_kind(args: argparse.Namespace, path: Path) -> InputKind:
     """The kind of ``path`` (``--format`` or detected), with its defaults."""
-    kind = KINDS[resolve_format(path, args.format)]
-    if kind.has_camera and (args.loops is not None or args.ground_truth is not None):
-        raise ParameterError(
-            f"{path} is a bag: --loops and --ground-truth belong to logs "
-            "(a bag's ground truth is a topic, --gt-topic)"
-        )
-    return kind
+    name = resolve_format(path, args.format)
+    check_companions(name, args.loops, args.ground_truth)
+    return KINDS[name]
 
 
 def log_options_from_args(args: argparse.Namespace) -> LogOptions:

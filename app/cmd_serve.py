@@ -26,7 +26,7 @@ from app.cli_common import (
 from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.session_file import describe, resume_session
-from cogmap_core.sources.detect import KINDS
+from cogmap_core.sources.detect import KINDS, check_companions
 
 DEFAULT_PORT = 8080
 
@@ -69,8 +69,7 @@ def _serve(args: argparse.Namespace) -> int:
     topics = topics_from_args(args)
     if args.bag is None:
         kind = KINDS["bag"]  # the built-in dataset
-        if args.loops is not None or args.ground_truth is not None:
-            raise ParameterError("--loops and --ground-truth belong to logs; give the log FILE")
+        check_companions("bag", args.loops, args.ground_truth)
     elif Path(args.bag).exists() or args.format != "auto":
         kind = input_kind(args, Path(args.bag))
     else:

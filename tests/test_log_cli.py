@@ -169,6 +169,12 @@ def write(path: Path, lines: list[str]) -> Path:
 ODOM = [f"odom2 {k / 10:.1f} 0.5 0 0 0 0 0" for k in range(50)]
 
 
+def _fake_bag(path: Path) -> Path:
+    """A file that a bag's first line makes a bag (never read further in these tests)."""
+    path.write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
+    return path
+
+
 def _binary(path: Path) -> Path:
     """A file that starts like a TUC log and then holds bytes that are not UTF-8."""
     path.write_bytes(b"odom2 0 0 0 0 0.1 0.1 0.1\n\xff\xfe\x00 binary\n")
@@ -230,6 +236,11 @@ def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
             "unknown log setting",
             [str(square_log), "--frontend", "threshold=0.5"],
             "unknown log source setting(s) ['threshold']",
+        ),
+        (
+            "--ground-truth with a bag",
+            [str(_fake_bag(tmp / "m.bag")), "--ground-truth", str(partial)],
+            "--loops and --ground-truth belong to logs; a bag's ground truth is a topic",
         ),
         (
             "a binary file read with --format",

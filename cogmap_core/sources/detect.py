@@ -78,6 +78,22 @@ class LogOptions:
     use_ground_truth: bool = True
 
 
+def check_companions(kind: str, loops: Path | None, ground_truth: Path | None) -> None:
+    """Refuse a loop or ground-truth file given for an input kind that does not take it.
+
+    Raises:
+        ParameterError: one line saying which option belongs to which input.
+
+    """
+    if kind == "bag" and (loops is not None or ground_truth is not None):
+        raise ParameterError(
+            "--loops and --ground-truth belong to logs; a bag's ground truth is a topic "
+            "(--gt-topic)"
+        )
+    if kind == "tuc" and loops is not None:
+        raise ParameterError("--loops belongs to CSV logs; a TUC input file holds its loops")
+
+
 Source = BagReader | LogReader
 """A reader of any kind: ``info`` (``duration``, ``frame_count``), ``frames(start_time)``,
 ``counters``, ``warnings`` and ``close()`` (a context manager)."""
@@ -157,12 +173,8 @@ def open_source(
     """
     kind = resolve_format(path, fmt)
     log = log or LogOptions()
+    check_companions(kind, log.loops, log.ground_truth)
     if kind == "bag":
-        if log.loops is not None or log.ground_truth is not None:
-            raise ParameterError(
-                "--loops and --ground-truth belong to logs; a bag's ground truth is a topic "
-                "(--gt-topic)"
-            )
         return open_bag(
             path,
             topics=topics,
@@ -171,8 +183,6 @@ def open_source(
             on_corrupt=on_corrupt,
         )
     if kind == "tuc":
-        if log.loops is not None:
-            raise ParameterError("--loops belongs to CSV logs; a TUC input file holds its loops")
         data = read_tuc(path, log.ground_truth, log.use_ground_truth)
     else:
         data = read_odometry_csv(path, log.loops, log.ground_truth, log.use_ground_truth)
