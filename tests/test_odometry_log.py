@@ -171,6 +171,26 @@ def test_bad_tuc_lines_name_file_and_line(tmp_path: Path, lines: list[str], mess
     assert text.startswith(str(path)) and message in text, text
 
 
+BAD_TRUTH = [
+    (["angle 0 0.5 0", "angle 1 nan 0"], ":3: ground-truth angle theta is nan"),
+    (["angle 1 0.5 0", "angle 0.5 0.5 0"], ":3: ground-truth angle time 0.500000 s is earlier"),
+    (["point2 0 0 0 0 0 0 0", "point2 1 0 0 0 0 0"], ":3: each 'point2' line has 7 numbers"),
+]
+
+
+@pytest.mark.parametrize(("lines", "message"), BAD_TRUTH)
+def test_bad_ground_truth_lines_name_file_and_line(
+    tmp_path: Path, lines: list[str], message: str
+) -> None:
+    path = write(tmp_path / "run_Input.txt", odom_lines(9))
+    truth = write(tmp_path / "run_GT.txt", ["point2 0 0 0 0 0 0 0", *lines])
+    with pytest.raises(LogFormatError) as caught:
+        read_tuc(path)
+    text = str(caught.value)
+    assert "\n" not in text
+    assert text.startswith(str(truth)) and message in text, text
+
+
 BAD_CSV = [
     (["time,v,omega", "0,1"], ":2: 2 columns; odometry files have 3 (time,v,omega)"),
     (["0,1,0", "1,one,0"], ":2: 'one' is not a number"),

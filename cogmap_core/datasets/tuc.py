@@ -25,6 +25,8 @@ from cogmap_core.sources.odometry_log import (
     LogFormatError,
     OdometryLog,
     Rows,
+    check_finite,
+    check_increasing,
     is_number,
     make_odometry_log,
     read_log_text,
@@ -122,8 +124,7 @@ def read_tuc(
 def read_tuc_ground_truth(path: Path) -> Rows:
     """The ``point2`` positions of a TUC ground-truth file, with ``angle`` headings if present."""
     points = Rows("ground truth", TRUTH_COLUMNS[:3])
-    angles: list[tuple[float, float]] = []
-    angle_where: list[str] = []
+    angles = Rows("ground-truth angle", ("time", "theta"))
     for line_no, words in _lines(path):
         kind = words[0]
         if kind not in TRUTH_FIELDS:
@@ -135,20 +136,11 @@ def read_tuc_ground_truth(path: Path) -> Rows:
         if kind == "point2":
             points.add(values[:3], f"{path}:{line_no}")
         else:
-            angles.append((values[0], values[1]))
-            angle_where.append(f"{path}:{line_no}")
-    if not angles or not points.values:
+            angles.add(values[:2], f"{path}:{line_no}")
+    if not angles.values or not points.values:
         return points
-    angle = np.asarray(angles)
-    bad = ~np.isfinite(angle)
-    if bad.any():
-        k = int(np.argwhere(bad)[0][0])
-        raise LogFormatError(f"{angle_where[k]}: ground-truth angle is not a finite number")
-    if np.any(np.diff(angle[:, 0]) < 0):
-        k = int(np.flatnonzero(np.diff(angle[:, 0]) < 0)[0]) + 1
-        raise LogFormatError(
-            f"{angle_where[k]}: ground-truth angle time goes backwards; sort the file by time"
-        )
+    angle = check_finite(angles)
+    check_increasing(angles, angle, "sort the file by time")
     times = np.asarray([v[0] for v in points.values], dtype=np.float64)
     theta = np.interp(times, angle[:, 0], np.unwrap(angle[:, 1]))
     full = Rows("ground truth", TRUTH_COLUMNS)

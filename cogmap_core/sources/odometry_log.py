@@ -262,7 +262,8 @@ class Rows:
         return np.asarray(self.values, dtype=np.float64).reshape(-1, len(self.columns))
 
 
-def _check_finite(rows: Rows) -> FloatArray:
+def check_finite(rows: Rows) -> FloatArray:
+    """The rows as an array; a value that is not finite is an error naming its file:line."""
     data = rows.array()
     bad = ~np.isfinite(data)
     if bad.any():
@@ -274,7 +275,8 @@ def _check_finite(rows: Rows) -> FloatArray:
     return data
 
 
-def _check_increasing(rows: Rows, data: FloatArray, hint: str) -> None:
+def check_increasing(rows: Rows, data: FloatArray, hint: str) -> None:
+    """Refuse a row whose time (first column) is earlier than the previous one's."""
     back = np.flatnonzero(np.diff(data[:, 0]) < 0)
     if back.size:
         k = int(back[0]) + 1
@@ -307,10 +309,10 @@ def make_odometry_log(
             f"{path}: no odometry in the file; a log needs {odometry.what} lines "
             f"({', '.join(odometry.columns)})"
         )
-    odo = _check_finite(odometry)
-    _check_increasing(odometry, odo, "odometry must be in time order")
+    odo = check_finite(odometry)
+    check_increasing(odometry, odo, "odometry must be in time order")
     t_first, t_last = float(odo[0, 0]), float(odo[-1, 0])
-    loop = _check_finite(loops)
+    loop = check_finite(loops)
     for k, (t, matched, score) in enumerate(loop.tolist()):
         where = loops.where[k]
         if not 0.0 <= score <= 1.0:
@@ -351,8 +353,8 @@ def _ground_truth(
         return None, True, f"{path}: no ground truth in the file; the report has no accuracy"
     if len(truth.columns) == 4 and np.isnan(truth.array()[:, 3]).all():
         truth = Rows(truth.what, truth.columns[:3], [v[:3] for v in truth.values], truth.where)
-    data = _check_finite(truth)
-    _check_increasing(truth, data, "ground truth must be in time order")
+    data = check_finite(truth)
+    check_increasing(truth, data, "ground truth must be in time order")
     heading_known = data.shape[1] == 4
     if not heading_known:
         data = np.column_stack([data, _direction_of_travel(data[:, 1:3])])
