@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -161,14 +162,19 @@ BAD_TUC = [
 ]
 
 
-@pytest.mark.parametrize(("lines", "message"), BAD_TUC)
-def test_bad_tuc_lines_name_file_and_line(tmp_path: Path, lines: list[str], message: str) -> None:
-    path = write(tmp_path / "bad_Input.txt", lines)
+def assert_one_line_error(read: Callable[[], object], path: Path, message: str) -> None:
+    """``read()`` raises a one-line LogFormatError starting with ``path`` and saying ``message``."""
     with pytest.raises(LogFormatError) as caught:
-        read_tuc(path)
+        read()
     text = str(caught.value)
     assert "\n" not in text
     assert text.startswith(str(path)) and message in text, text
+
+
+@pytest.mark.parametrize(("lines", "message"), BAD_TUC)
+def test_bad_tuc_lines_name_file_and_line(tmp_path: Path, lines: list[str], message: str) -> None:
+    path = write(tmp_path / "bad_Input.txt", lines)
+    assert_one_line_error(lambda: read_tuc(path), path, message)
 
 
 BAD_TRUTH = [
@@ -184,11 +190,7 @@ def test_bad_ground_truth_lines_name_file_and_line(
 ) -> None:
     path = write(tmp_path / "run_Input.txt", odom_lines(9))
     truth = write(tmp_path / "run_GT.txt", ["point2 0 0 0 0 0 0 0", *lines])
-    with pytest.raises(LogFormatError) as caught:
-        read_tuc(path)
-    text = str(caught.value)
-    assert "\n" not in text
-    assert text.startswith(str(truth)) and message in text, text
+    assert_one_line_error(lambda: read_tuc(path), truth, message)
 
 
 BAD_CSV = [
@@ -202,9 +204,7 @@ BAD_CSV = [
 @pytest.mark.parametrize(("lines", "message"), BAD_CSV)
 def test_bad_csv_lines_name_file_and_line(tmp_path: Path, lines: list[str], message: str) -> None:
     path = write(tmp_path / "bad_odometry.csv", lines)
-    with pytest.raises(LogFormatError) as caught:
-        read_odometry_csv(path)
-    assert str(caught.value).startswith(str(path)) and message in str(caught.value)
+    assert_one_line_error(lambda: read_odometry_csv(path), path, message)
 
 
 def test_detection_from_the_content(tmp_path: Path, straight: Path) -> None:

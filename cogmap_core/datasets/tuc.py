@@ -14,6 +14,7 @@ no lateral velocity). Every malformed line is an error naming file and line.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -71,14 +72,25 @@ def _numbers(path: Path, line_no: int, words: list[str], expected: int) -> list[
         ) from None
 
 
-def _lines(path: Path) -> list[tuple[int, list[str]]]:
+def _measurements(
+    path: Path, fields: dict[str, int], holds: str
+) -> Iterator[tuple[str, str, list[float]]]:
+    """``(kind, "file:line", numbers)`` of each measurement line of a TUC file.
+
+    ``fields`` are the measurement types the file may hold; ``holds`` says which, for the
+    message about a line of another type.
+    """
     text = read_log_text(path, "TUC measurement lines")
-    out = []
     for line_no, line in enumerate(text.splitlines(), start=1):
         words = line.split()
-        if words and not words[0].startswith("#"):
-            out.append((line_no, words))
-    return out
+        if not words or words[0].startswith("#"):
+            continue
+        kind = words[0]
+        if kind not in fields:
+            raise LogFormatError(
+                f"{path}:{line_no}: unknown measurement type {kind!r}; a TUC {holds}"
+            )
+        yield kind, f"{path}:{line_no}", _numbers(path, line_no, words, fields[kind])
 
 
 def read_tuc(
@@ -99,18 +111,12 @@ def read_tuc(
     path = Path(path)
     odometry = Rows("odometry", ODOMETRY_COLUMNS)
     loops = Rows("loop", LOOP_COLUMNS)
-    for line_no, words in _lines(path):
-        kind = words[0]
-        if kind not in INPUT_FIELDS:
-            raise LogFormatError(
-                f"{path}:{line_no}: unknown measurement type {kind!r}; a TUC input file has "
-                "'odom2' and 'loop' lines"
-            )
-        values = _numbers(path, line_no, words, INPUT_FIELDS[kind])
+    holds = "input file has 'odom2' and 'loop' lines"
+    for kind, where, values in _measurements(path, INPUT_FIELDS, holds):
         if kind == "odom2":
-            odometry.add((values[0], values[1], values[3]), f"{path}:{line_no}")
+            odometry.add((values[0], values[1], values[3]), where)
         else:
-            loops.add(values, f"{path}:{line_no}")
+            loops.add(values, where)
     truth_path = None
     truth = None
     if use_ground_truth:
@@ -125,18 +131,12 @@ def read_tuc_ground_truth(path: Path) -> Rows:
     """The ``point2`` positions of a TUC ground-truth file, with ``angle`` headings if present."""
     points = Rows("ground truth", TRUTH_COLUMNS[:3])
     angles = Rows("ground-truth angle", ("time", "theta"))
-    for line_no, words in _lines(path):
-        kind = words[0]
-        if kind not in TRUTH_FIELDS:
-            raise LogFormatError(
-                f"{path}:{line_no}: unknown measurement type {kind!r}; a TUC ground-truth file "
-                "has 'point2' (and 'angle') lines"
-            )
-        values = _numbers(path, line_no, words, TRUTH_FIELDS[kind])
+    holds = "ground-truth file has 'point2' (and 'angle') lines"
+    for kind, where, values in _measurements(path, TRUTH_FIELDS, holds):
         if kind == "point2":
-            points.add(values[:3], f"{path}:{line_no}")
+            points.add(values[:3], where)
         else:
-            angles.add(values[:2], f"{path}:{line_no}")
+            angles.add(values[:2], where)
     if not angles.values or not points.values:
         return points
     angle = check_finite(angles)
