@@ -83,7 +83,8 @@ class MapSnapshot:
         return relative_to_polar(self.edge_rel)[2]
 
 
-def _grow(array: NDArray, size: int, fill: float = 0) -> NDArray:
+def grow_array(array: NDArray, size: int, fill: float = 0) -> NDArray:
+    """A copy of ``array`` with ``size`` rows; the new rows hold ``fill``."""
     out = np.full((size,) + array.shape[1:], fill, dtype=array.dtype)
     out[: array.shape[0]] = array
     return out
@@ -129,12 +130,12 @@ class MapGraph:
         cap = self.pose.shape[0]
         if n > cap:
             new = max(n, 2 * cap)
-            self.pose = _grow(self.pose, new)
-            self.vertex_time = _grow(self.vertex_time, new)
-            self.view = _grow(self.view, new)
-            self.alive = _grow(self.alive, new)
-            self.alias = _grow(self.alias, new, fill=-1)
-            self.alias_offset = _grow(self.alias_offset, new)
+            self.pose = grow_array(self.pose, new)
+            self.vertex_time = grow_array(self.vertex_time, new)
+            self.view = grow_array(self.view, new)
+            self.alive = grow_array(self.alive, new)
+            self.alias = grow_array(self.alias, new, fill=-1)
+            self.alias_offset = grow_array(self.alias_offset, new)
         self.num_ids = n
         self.vertex_time[vertex_id] = time
         self.view[vertex_id] = view
@@ -191,13 +192,13 @@ class MapGraph:
         cap = self.edge_from.shape[0]
         if k + 1 > cap:
             new = 2 * cap
-            self.edge_from = _grow(self.edge_from, new)
-            self.edge_to = _grow(self.edge_to, new)
-            self.edge_rel = _grow(self.edge_rel, new)
-            self.edge_time = _grow(self.edge_time, new)
-            self.edge_kind = _grow(self.edge_kind, new)
-            self.edge_cluster = _grow(self.edge_cluster, new, fill=-1)
-            self.edge_alive = _grow(self.edge_alive, new)
+            self.edge_from = grow_array(self.edge_from, new)
+            self.edge_to = grow_array(self.edge_to, new)
+            self.edge_rel = grow_array(self.edge_rel, new)
+            self.edge_time = grow_array(self.edge_time, new)
+            self.edge_kind = grow_array(self.edge_kind, new)
+            self.edge_cluster = grow_array(self.edge_cluster, new, fill=-1)
+            self.edge_alive = grow_array(self.edge_alive, new)
         self.edge_from[k], self.edge_to[k] = src, dst
         self.edge_rel[k] = (rel[0], rel[1], wrap_scalar(rel[2]))
         self.edge_time[k] = t

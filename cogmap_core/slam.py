@@ -50,6 +50,7 @@ from cogmap_core.event_file import (
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
+from cogmap_core.map_graph import grow_array
 
 FloatArray = NDArray[np.float64]
 ALL_MODES: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
@@ -260,14 +261,15 @@ class EventLog:
         if n > cap:
             new = max(n, 2 * cap)
             for name in _LOG_COLUMNS:
-                setattr(self, "_" + name, _grown(getattr(self, "_" + name), new))
+                fill = np.nan if name == "score" else 0  # (NaN: no score)
+                setattr(self, "_" + name, grow_array(getattr(self, "_" + name), new, fill))
 
     def _reserve_frames(self, n: int) -> None:
         cap = self._frame_end.shape[0]
         if n > cap:
             new = max(n, 2 * cap)
             for name in ("_frame_end", "_frame_time", "_truth", "_has_truth"):
-                setattr(self, name, _grown(getattr(self, name), new))
+                setattr(self, name, grow_array(getattr(self, name), new))
 
     def truncated(self, frames: int) -> EventLog:
         """A copy of the first ``frames`` frames."""
@@ -524,12 +526,6 @@ class EventLog:
             recording.frame_time,
             recording.ground_truth,
         )
-
-
-def _grown(array: NDArray[Any], size: int) -> NDArray[Any]:
-    out = np.zeros((size, *array.shape[1:]), dtype=array.dtype)
-    out[: array.shape[0]] = array
-    return out
 
 
 def _read_only(array: NDArray[Any]) -> NDArray[Any]:

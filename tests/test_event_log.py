@@ -134,6 +134,17 @@ def test_link_scores_are_a_column() -> None:
     assert EventLog.from_columns(columns, log.frame_end, log.frame_time).link_scores == [None] * 3
 
 
+def test_links_beyond_the_first_capacity_have_no_score_without_a_score_column() -> None:
+    """Columns grown past the log's first capacity keep "no score" (NaN), not a score of 0."""
+    log = EventLog()
+    log.append_frame([Odometry(0.0, 0.0, 0.0), CreateVertex(0.0, 0, 0)], 0.0)
+    for k in range(1, 1500):
+        log.append_frame([LinkToVertex(0.1 * k, 0, 0.0)], 0.1 * k)
+    columns = {k: v for k, v in log.columns().items() if k != "score"}
+    again = EventLog.from_columns(columns, log.frame_end, log.frame_time)
+    assert again.link_scores == [None] * 1499
+
+
 # ------------------------------------------------------------------------------ event files
 def _rewrite(path: Path, target: Path, **changes: object) -> Path:
     """A copy of the event file ``path`` with header fields or arrays changed."""
