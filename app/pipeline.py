@@ -489,7 +489,7 @@ class HeadlessPipeline:
 
     def _write_config(self, report: ReportFolder) -> None:
         config: dict[str, Any] = {"dataset": str(self.bag), "format": self.format}
-        config["map"] = self.options.params.to_dict()
+        config["map"] = self.session.params.to_dict()  # a resumed session's own
         if self.frontend is not None:
             config["image_scale"] = self.options.image_scale
             config["frontend"] = self.frontend.to_dict()

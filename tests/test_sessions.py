@@ -242,6 +242,20 @@ def test_resume_offsets() -> None:
     assert meta.resume_offset(bag_start=1000.0, data_time=800.0) == 800.0 + RESUME_GAP_S
 
 
+def test_a_resumed_run_records_the_session_parameters_in_its_config(
+    days: tuple[Path, Path], tmp_path: Path
+) -> None:
+    day1, day2 = days
+    session = tmp_path / "d5.session.npz"
+    assert main(["run", str(day1), "--out", str(tmp_path / "r1"), "--delta", "5",
+                 "--save-session", str(session)]) == 0  # fmt: skip
+    out = tmp_path / "r2"
+    assert main(["run", str(day2), "--out", str(out), "--resume", str(session)]) == 0
+    config = json.loads((out / "config.json").read_text())
+    summary = json.loads((out / "summary.json").read_text())
+    assert config["map"]["delta"] == summary["params"]["delta"] == 5.0  # not the default's
+
+
 def test_map_parameters_given_on_resume_rebuild_the_maps(
     resumed: Path, days: tuple[Path, Path], tmp_path: Path
 ) -> None:
