@@ -21,6 +21,7 @@ from app.cli_common import (
     input_kind,
     log_options_from_args,
     map_changes_from_args,
+    resolve_bag,
     topics_from_args,
 )
 from app.server.replay import BagSource, GenerationProgress
@@ -67,13 +68,12 @@ def display_url(host: str, port: int) -> str:
 def _serve(args: argparse.Namespace) -> int:
     changes = map_changes_from_args(args)  # read and validated once, before anything starts
     topics = topics_from_args(args)
-    if args.bag is None:
-        kind = KINDS["bag"]  # the built-in dataset
+    companions = args.loops is not None or args.ground_truth is not None
+    if args.bag is not None and (Path(args.bag).exists() or args.format != "auto" or companions):
+        kind = input_kind(args, Path(args.bag))  # (a missing file with companions: an error)
+    else:  # the built-in dataset, or a missing bag (reported on the page, as for any bag)
+        kind = KINDS["bag"]
         check_companions("bag", args.loops, args.ground_truth)
-    elif Path(args.bag).exists() or args.format != "auto":
-        kind = input_kind(args, Path(args.bag))
-    else:
-        kind = KINDS["bag"]  # a missing file is reported on the page, as for any bag
     params = kind.map_params.with_changes(**changes)
     if kind.has_camera:
         frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile)
@@ -93,9 +93,7 @@ def _serve(args: argparse.Namespace) -> int:
             raise ParameterError(
                 "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
             )
-        bag_path = Path(args.bag)
-        if not bag_path.exists():
-            raise InputFileError(f"{bag_path}: no such bag; give an existing .bag file")
+        bag_path = resolve_bag(args.bag, logs=False)
         resume = resume_session(args.resume, frontend_from_args(args, bag_path), 4, changes)
         print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     import viser

@@ -125,6 +125,13 @@ def test_bad_arguments_fail_fast_with_one_line(capsys: pytest.CaptureFixture[str
     assert "port 70000 is out of range" in capsys.readouterr().err
     assert main(["serve", "--frontend", "vt_match_threshold"]) == 2
     assert "write KEY=VALUE" in capsys.readouterr().err
+    # a missing log with its ground truth named: refused now, not silently served without it
+    assert main(["serve", "missing_odometry.csv", "--ground-truth", "gt.csv"]) == 2
+    err = capsys.readouterr().err.strip()
+    expected = "missing_odometry.csv: no such file; give a bag, a TUC log or a CSV log"
+    assert err == f"cogmap serve: error: {expected}"
+    assert main(["serve", "missing.bag", "--resume", "s.npz"]) == 2
+    assert "missing.bag: no such bag; give an existing .bag file" in capsys.readouterr().err
 
 
 def test_display_url() -> None:
