@@ -277,6 +277,25 @@ def test_each_viewer_has_its_own_view(short_bag: Path, reference: SlamSession) -
             until(lambda: len(app.views) == 1)
 
 
+def test_the_shown_after_line_describes_the_latest_parameter_change(short_bag: Path) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        with hello(app.server.get_port()):
+            until(lambda: len(app.views) == 1)
+            view = next(iter(app.views.values()))
+            for delta in (5.0, 6.0):
+                app.replay.set_params(MapParams(delta=delta))
+                wait(app)
+                last = app.replay.last_completed_rebuild()
+                assert last is not None and last.params.delta == delta
+                shown = ", ".join(
+                    f"{m.value} {last.latency(m) * 1000:.0f} ms ({last.how[m]})"
+                    for m in last.published
+                )
+                # the view's log follows the change whose maps are all shown, not the one before
+                until(lambda shown=shown: f"shown after: {shown}<" in view.log_html.content)
+
+
 def test_inspect_pin_and_compare(short_bag: Path, reference: SlamSession) -> None:
     with running_app(short_bag) as app:
         wait(app)

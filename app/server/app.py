@@ -1106,9 +1106,8 @@ class CogmapApp:
                 f"<tbody>{rows}</tbody></table>"
             )
         latency = ""
-        rebuilds = [b for b in self.replay.rebuilds if b.completed]
-        if rebuilds:
-            last = rebuilds[-1]
+        last = self.replay.last_completed_rebuild()
+        if last is not None:
             shown = [
                 f"{m.value} {last.latency(m) * 1000:.0f} ms ({last.how.get(m, '')})"
                 for m in last.published

@@ -469,6 +469,10 @@ class Replay:
         except Exception:  # a listener problem must not stop the replay
             traceback.print_exc(file=sys.stderr)
 
+    def last_completed_rebuild(self) -> RebuildRecord | None:
+        """The latest parameter change whose maps are all shown (None before any)."""
+        return next((b for b in reversed(self.rebuilds) if b.completed), None)
+
     def _notify_maps(self, modes: tuple[MapMode, ...], forced: bool) -> None:
         try:
             self.listener.on_maps(self, modes, forced)
@@ -828,6 +832,7 @@ class Replay:
         record.completed = True
         with self._cond:
             self._anchor = None
+        self._notify_maps((), True)  # the pages' "shown after" line now covers this change
         self._notify_status()
 
     def _publish_rebuilt(

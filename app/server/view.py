@@ -482,7 +482,7 @@ class ClientView:
         with app.replay.lock:
             cmap = app.replay.session.maps[self.state.mode]
             key = (id(cmap), len(cmap.optimizations), len(cmap.clusters), cmap.num_loop_edges,
-                   len(app.replay.rebuilds))  # fmt: skip
+                   id(app.replay.last_completed_rebuild()))  # fmt: skip
             if key != self._log_key:
                 self._log_key = key
                 self.log_html.content = app.cluster_log_html(self.state.mode, cmap)
