@@ -16,12 +16,16 @@ from app.server.export import summary_dict
 from app.server.figures import false_link_label, layout_radius_label
 from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import MapMode
+from cogmap_core.config import MapParams
 from cogmap_core.evaluation import EvaluationSettings
 from cogmap_core.slam import EventLog, SlamSession
 from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
+from tests import test_server_support as support
 from tests.test_log_cli import square_run
 from tests.test_server_support import assert_same_map, counter, running_app
+
+short_bag = support.short_bag
 
 
 @pytest.fixture(scope="module")
@@ -126,3 +130,19 @@ def test_the_page_and_the_replay_judge_a_log_with_its_own_tolerances(
         wait(app)
         export.save_html_replay(app.replay, (MapMode.COMPACT,), tmp_path / "r.html", 3, 0.1)
     assert judged == [reference.evaluation]
+
+
+def test_opening_a_bag_after_a_log_shows_the_camera_and_the_bag_defaults(
+    square_log: Path, short_bag: Path
+) -> None:
+    with running_app(square_log, params=LOG_MAP_PARAMS, defaults=LOG_MAP_PARAMS) as app:
+        wait(app)
+        assert not app.camera_image.visible and "cogmap-links" in app.links_html.content
+        assert app.open_bag(str(short_bag))
+        wait(app)
+        assert app.replay.has_camera and app.camera_image.visible
+        assert app.links_html.content == ""
+        # the log's parameters (alpha 2.746, link sigma 0.5 m, ...) are not carried to a bag
+        assert app.replay.params == MapParams() == app.defaults
+        assert app.param_sliders["alpha"].value == MapParams().alpha
+        assert app.reset_button.label == "reset to paper values"

@@ -214,6 +214,20 @@ def test_playback_status_play_at_the_end_seek_follows_and_frame_numbers(
             assert_same_map(r.session.maps[mode], reference.maps[mode])
 
 
+def test_a_seek_note_lasts_until_the_next_typed_seek(short_bag: Path) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        with hello(app.server.get_port()) as ws:
+            until(lambda: len(app.views) == 1)
+            send(ws, app.seek_box, "abc")
+            until(lambda: "cogmap-message" in app.status_html.content)
+            assert "abc" in html.unescape(app.status_html.content)
+            send(ws, app.seek_box, "1")  # a valid seek: the refusal is no longer news
+            until(lambda: app.replay.frame_time <= 1.05)
+            app._update_status(force=True)
+            assert "cogmap-message" not in app.status_html.content
+
+
 def test_the_replay_waits_for_the_first_viewer(short_bag: Path) -> None:
     with running_app(short_bag, wait_for_viewer=True) as app:
         until(lambda: app.replay.state is PlaybackState.PAUSED)

@@ -74,7 +74,7 @@ from cogmap_core.event_file import KIND_LINK
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, EventLog, SlamSession
-from cogmap_core.sources.detect import LogOptions
+from cogmap_core.sources.detect import KINDS, LogOptions
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -270,6 +270,9 @@ class CogmapApp:
             lock=self._replay_lock,
         )
 
+    def _reset_label(self) -> str:
+        return "reset to paper values" if self.defaults == MapParams() else "reset to defaults"
+
     def _defaults_name(self) -> str:
         return "paper values" if self.defaults == MapParams() else "defaults"
 
@@ -351,8 +354,7 @@ class CogmapApp:
             with gui.add_folder("Advanced", expand_by_default=False):
                 for spec in ADVANCED_SLIDERS:
                     self._add_param(spec, params)
-            label = "reset to paper values" if self.defaults == MapParams() else "reset to defaults"
-            self.reset_button = gui.add_button(label, icon=viser.Icon.RESTORE)
+            self.reset_button = gui.add_button(self._reset_label(), icon=viser.Icon.RESTORE)
             self.params_md = gui.add_html(self._params_message(self._defaults_name()))
         self.reset_button.on_click(lambda _: self.reset_params())
 
@@ -558,6 +560,7 @@ class CogmapApp:
 
     def _seek_check(self) -> Any:
         def check(value: object) -> object:
+            self.status_note = ""  # a note is about the value typed last (set again below)
             if not isinstance(value, str):
                 raise Refused(f"{value!r} is not text")
             spec = SliderSpec("seek", "seek", 0.0, float(self.seek_slider.max), 0.1, "")
@@ -743,6 +746,8 @@ class CogmapApp:
             self._show_links(frame)
             return
         r = self.replay
+        if not self.camera_image.visible:  # (hidden while a log was replayed)
+            self.camera_image.visible = True
         self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
@@ -923,7 +928,7 @@ class CogmapApp:
             parts.append(f"t = {t:.1f} / {r.duration:.1f} s · {bag}")
         text_ = " · ".join(parts)
         message = ""
-        note = getattr(self, "status_note", "")
+        note = self.status_note
         if r.message or note:
             mcolor = "#b00020" if state is PlaybackState.ERROR or note else "#555"
             message = (
@@ -1210,6 +1215,9 @@ class CogmapApp:
             old = self.replay
             params = old.params
             speed = old.speed
+            from_log = not old.has_camera
+            if from_log:  # a log's map parameters are not a bag's: start from the bag's own
+                params = self.defaults = KINDS["bag"].map_params
             old.stop()  # joins its worker, which may be waiting for the replay lock
             with self._replay_lock, self.scene_lock:
                 self.streamer.reset()
@@ -1220,8 +1228,12 @@ class CogmapApp:
                 self._odometry_key = None
                 self.replay = self._make_replay(path, params, speed, True)
                 self.started_at = time.monotonic()
+                self.links_html.content = ""  # (a log's latest links)
             self.views_changed()
             self.replay.start()
+        if from_log:
+            self.reset_button.label = self._reset_label()
+            self.reset_params()  # the sliders show the bag's defaults (no rebuild: in use)
         self._open_message(f"opened {path} ({frames} frames); replaying it for everyone")
         self._sync_play_button()
         return True
