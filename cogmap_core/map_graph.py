@@ -82,6 +82,12 @@ class MapSnapshot:
         """Heading change from source to target."""
         return relative_to_polar(self.edge_rel)[2]
 
+    def edge_ends(self) -> tuple[IntArray, IntArray]:
+        """Per edge, the row (in this snapshot's vertex arrays) of its first and second vertex."""
+        rows = np.searchsorted(self.vertex_ids, np.r_[self.edge_from, self.edge_to])
+        m = self.edge_from.shape[0]
+        return rows[:m], rows[m:]
+
 
 def grow_array(array: NDArray, size: int, fill: float = 0) -> NDArray:
     """A copy of ``array`` with ``size`` rows; the new rows hold ``fill``."""

@@ -429,10 +429,8 @@ class EventLog:
         snap = cmap.snapshot()
         truth = self.truth_at(snap.vertex_time)
         assert truth is not None
-        index = np.searchsorted(snap.vertex_ids, np.r_[snap.edge_from, snap.edge_to])
-        m = snap.edge_from.shape[0]
         return layout_fidelity(
-            snap.poses, truth, index[:m], index[m:], np.asarray(self.ground_truth), radius
+            snap.poses, truth, *snap.edge_ends(), np.asarray(self.ground_truth), radius
         )
 
     def size_change(

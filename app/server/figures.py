@@ -74,9 +74,7 @@ def compute_figures(inputs: FigureInputs, judging: EvaluationSettings | None = N
     radius = (judging or EvaluationSettings()).layout_radius
     n = snap.vertex_ids.shape[0]
     ate = absolute_trajectory_error(snap.poses, truth) if n else None
-    index = np.searchsorted(snap.vertex_ids, np.r_[snap.edge_from, snap.edge_to])
-    m = snap.edge_from.shape[0]
-    fidelity = layout_fidelity(snap.poses, truth, index[:m], index[m:], path, radius)
+    fidelity = layout_fidelity(snap.poses, truth, *snap.edge_ends(), path, radius)
     return MapFigures(ate, fidelity, _alignment(snap, truth, path))
 
 

@@ -577,8 +577,9 @@ class MapLayer:
         m = snap.edge_from.shape[0]
         segments = np.empty((m, 2, 3), dtype=np.float32)
         if m:
-            segments[:, 0, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
-            segments[:, 1, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
+            ends = snap.edge_ends()
+            segments[:, 0, :2] = snap.poses[ends[0], :2]
+            segments[:, 1, :2] = snap.poses[ends[1], :2]
         is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
         segments[:, :, 2] = np.where(is_loop, LOOP_Z, SEQUENTIAL_Z)[:, None]
         size = self._point_size(segments[~is_loop])

@@ -604,8 +604,9 @@ class ClientView:
         m = snap.edge_from.shape[0]
         if m:
             seg = np.zeros((m, 2, 3), dtype=np.float32)
-            seg[:, 0, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
-            seg[:, 1, :2] = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
+            ends = snap.edge_ends()
+            seg[:, 0, :2] = snap.poses[ends[0], :2]
+            seg[:, 1, :2] = snap.poses[ends[1], :2]
             loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
             colors = np.where(loop[:, None], (110, 60, 170), (185, 170, 215)).astype(np.uint8)
             self._pinned_nodes.append(
@@ -751,8 +752,8 @@ def nearest_pick(
     k = int(np.argmin(d))
     gap_e, e = math.inf, -1
     if snap.edge_from.shape[0]:
-        a = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_from), :2]
-        b = snap.poses[np.searchsorted(snap.vertex_ids, snap.edge_to), :2]
+        first, second = snap.edge_ends()
+        a, b = snap.poses[first, :2], snap.poses[second, :2]
         ab = b - a
         length = np.hypot(ab[:, 0], ab[:, 1])
         denom = np.where(length > 0, length * length, 1.0)
