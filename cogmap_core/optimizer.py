@@ -50,7 +50,6 @@ from cogmap_core.posegraph import PoseGraph
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-_IDENTITY = np.eye(3)
 AUTO_LAGO_COST_PER_EDGE = 1.0
 """With ``initialization="auto"``: LAGO when the initial cost exceeds this many units per edge."""
 
@@ -151,13 +150,12 @@ class EdgeModel:
         rz_t = np.zeros_like(information)
         rz_t[:, 0, 0], rz_t[:, 0, 1], rz_t[:, 1, 0], rz_t[:, 1, 1] = cz, sz, -sz, cz
         rz_t[:, 2, 2] = 1.0
-        diagonal = information[:, [0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]]
+        off_diagonal = information[:, [0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]]
         scale = information[:, [0, 1, 2], [0, 1, 2]]
-        if (information == _IDENTITY).all():  # the paper's identity weights: no whitening needed
-            self.whitening = rz_t
-        elif not diagonal.any() and (scale > 0).all() and np.isfinite(scale).all():
-            # Diagonal information (the map's noise model): the Cholesky factor is the square
-            # root of the diagonal, and this product is exactly the general one below.
+        if not off_diagonal.any() and (scale > 0).all() and np.isfinite(scale).all():
+            # Diagonal information (the map's noise model; the paper's identity): the Cholesky
+            # factor is the square root of the diagonal (sqrt(1) * x == x exactly), and this
+            # product is exactly the general one below.
             self.whitening = np.sqrt(scale)[:, :, None] * rz_t
         else:
             try:

@@ -33,7 +33,7 @@ import viser
 import viser.uplot
 
 from app.server.assets import head_html, help_markdown
-from app.server.chart import chart_data, chart_options, chart_series, y_top
+from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, y_top
 from app.server.export import (
     default_replay_path,
     g2o_bytes,
@@ -1063,7 +1063,7 @@ class CogmapApp:
     def _update_chart(self) -> None:
         maps = dict(self.replay.session.maps.maps)
         data = chart_data(maps, self.replay.data_time)  # session time (bag time unless resuming)
-        top = y_top(max(float(np.max(series)) for series in data[1:7]))
+        top = y_top(max(float(np.max(series)) for series in data[SIZE_SERIES]))
         with self.server.atomic():
             if self.chart.scales != chart_options(top)["scales"]:
                 self.chart.scales = chart_options(top)["scales"]  # type: ignore[assignment]

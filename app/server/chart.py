@@ -25,8 +25,8 @@ from cogmap_core.slam import ALL_MODES
 SHORT = {MapMode.STANDARD: "std", MapMode.SCENE_INTEGRATION: "s.i.", MapMode.COMPACT: "compact"}
 #: Samples of the size curves over the data so far.
 CHART_POINTS = 400
-#: Series: x, then per map vertices and edges, then per map its optimisation markers.
-NUM_SERIES = 1 + 2 * len(ALL_MODES) + len(ALL_MODES)
+#: Series: x, then per map vertices and edges (these), then per map its optimisation markers.
+SIZE_SERIES = slice(1, 1 + 2 * len(ALL_MODES))
 #: A marker series' value where it has no marker (outside the y range: not drawn).
 OFF_CHART = -1e9
 

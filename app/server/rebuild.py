@@ -276,9 +276,6 @@ class ThreadBuilder:
             cmap = build_map(log, task, interrupted)
             yield Built(task, cmap, time.perf_counter() - started)
 
-    def reset(self) -> None:
-        """Nothing to forget."""
-
     def prepare(self, log: EventLog) -> None:
         """Nothing to send."""
 
@@ -439,9 +436,6 @@ class ProcessBuilder:
 
     def _pool_workers(self) -> list[_Worker]:
         return self.pool.workers[: self.workers]
-
-    def reset(self) -> None:
-        """Nothing to do: workers notice a new log by themselves."""
 
     def prepare(self, log: EventLog) -> None:
         """Send every worker the events of ``log`` it does not have yet (while nothing builds)."""

@@ -549,8 +549,7 @@ class Replay:
             self.frontend_config = config
             self.session = SlamSession(self._target_params, config, evaluation=kind.evaluation)
             self._log_id += 1
-            self.cache.clear()
-            self.builder.reset()
+            self.cache.clear()  # (the builder's workers notice a new log by themselves)
 
     def _resolve_bag(self) -> Path:
         source = self.bag_source

@@ -229,11 +229,6 @@ class GuiGate:
         if note is not None:
             note(f"refused {label}: {reason}; kept {handle._impl.value!r}")
 
-    def close(self) -> None:
-        """Give viser its own handler back."""
-        self._websock.unregister_handler(_messages.GuiUpdateMessage, self._handle)
-        self._websock.register_handler(_messages.GuiUpdateMessage, self._original)
-
     def _resend(self, handle: Any) -> None:
         """Send the value in force to every client (the sender's control shows it again)."""
         self._websock.queue_message(
