@@ -44,6 +44,7 @@ from typing import Any, TextIO
 import cv2
 import numpy as np
 
+from app.params_file import BEST_FORMAT
 from app.plots import BLACK, FONT, Panel
 from app.progress import ProgressBar
 from cogmap_core import __version__
@@ -83,7 +84,6 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = None  # type: ignore[assignment]
 
 SWEEP_FORMAT = "cogmap-sweep"
-BEST_FORMAT = "cogmap-sweep-best"
 SWEEP_VERSION = 1
 IMAGE_SCALE = 4  # as cogmap run
 CELL_VERSION = 1  # bump when a cell's figures change meaning: old rows are then not reused

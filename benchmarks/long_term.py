@@ -309,12 +309,14 @@ def main() -> int:
     if dead_reckoning is not None:
         print(f"dead-reckoning ATE {dead_reckoning:.3f} m (the baseline of the maps' ATE)")
     changes = {}
+    fidelities = {}
     for mode in MODES:
         cmap = run.session.maps[mode]
         change = log.size_change(cmap, lap_times[first_lap], lap_times[laps], LAYOUT_RADIUS)
         fidelity = log.layout_fidelity(cmap, LAYOUT_RADIUS)
         assert change is not None and fidelity is not None
         changes[mode] = change
+        fidelities[mode] = fidelity
         optimise_s = sum(o.wall_s for o in cmap.optimizations)
         ate = log.map_ate(cmap)
         print(
@@ -337,9 +339,7 @@ def main() -> int:
     save_png(figure(run, lap_times), args.out / "long_term.png")
     print(f"wrote {args.out / 'long_term.png'}")
 
-    compact = run.session.maps[MapMode.COMPACT]
-    fidelity = log.layout_fidelity(compact, LAYOUT_RADIUS)
-    assert fidelity is not None
+    fidelity = fidelities[MapMode.COMPACT]
     ref = run.laps[min(6, laps) - 1]
     last = run.laps[-1]
     fe_ratio = last.ms("frontend") / ref.ms("frontend")

@@ -2,7 +2,8 @@
 
 For each 6-lap layout (the default dataset ``irat_australia`` and ``figure_eight``,
 ``long_corridors``, ``junction_dead_end``), the bag is generated once into the cache and the
-front end run once (its events are cached beside the bag as an event file); then the three maps
+front end run once (its events are kept in the user-wide event cache, ``$COGMAP_CACHE/events``);
+then the three maps
 are built from the events with the paper's parameters and every figure is printed per map:
 
 - vertices, edges, loop edges, edges per vertex;

@@ -3,9 +3,10 @@
 Drives the server the way a browser does: a value is typed into a parameter's box (the same
 callback a client's message runs), and the time from that change to the displayed map being
 handed to the scene is measured (``RebuildRecord.latency``), with the time until all three maps
-are up to date. The maps are built from the front end's events cached beside the bag (made once
-with the front end if missing), as the app's replay cache holds them after a first pass: the app
-is loaded with them, put at the end of the data and every measurement starts from there.
+are up to date. The maps are built from the front end's events in the user-wide event cache
+(made once with the front end if missing), as the app's replay cache holds them after a first
+pass: the app is loaded with them, put at the end of the data and every measurement starts from
+there.
 
 For each shown map (compact, scene_integration, standard) and each of the five sliders (alpha,
 beta, delta, T_interval, T_total) it types ``--values`` values never used before (no cache hit;
