@@ -143,6 +143,16 @@ def test_a_log_report_is_staged_like_a_bag_report(square_log: Path, tmp_path: Pa
     assert mine.read_text() == "keep me" and (out / "summary.json").is_file()
 
 
+def test_an_empty_ground_truth_file_is_a_warning(tmp_path: Path, capsys) -> None:
+    log = write(tmp_path / "e_Input.txt", ODOM)
+    write(tmp_path / "e_GT.txt", ["# no positions"])
+    out = tmp_path / "run"
+    assert main(["run", str(log), "--out", str(out)]) == 0
+    said = f"warning: {tmp_path / 'e_GT.txt'}: no ground truth in the file; the report has no"
+    assert any(line.startswith(said) for line in capsys.readouterr().out.splitlines())
+    assert json.loads((out / "summary.json").read_text())["dead_reckoning_ate_m"] is None
+
+
 def test_sessions_are_refused_for_logs(square_log: Path, tmp_path: Path, capsys) -> None:
     out = tmp_path / "run"
     session = tmp_path / "s.npz"

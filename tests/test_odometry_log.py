@@ -181,6 +181,11 @@ BAD_TRUTH = [
     (["angle 0 0.5 0", "angle 1 nan 0"], ":3: ground-truth angle theta is nan"),
     (["angle 1 0.5 0", "angle 0.5 0.5 0"], ":3: ground-truth angle time 0.500000 s is earlier"),
     (["point2 0 0 0 0 0 0 0", "point2 1 0 0 0 0 0"], ":3: each 'point2' line has 7 numbers"),
+    (["point2 1 nan 0 0 0 0 0"], ":2: ground truth x is nan; every value must be a finite number"),
+    (
+        ["point2 2 0 0 0 0 0 0", "point2 1 0 0 0 0 0 0"],
+        ":3: ground truth time 1.000000 s is earlier",
+    ),
 ]
 
 

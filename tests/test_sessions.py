@@ -361,9 +361,17 @@ def test_existing_session_target_needs_force(
     assert "does not exist" in capsys.readouterr().err
 
 
-def test_missing_session_file(days: tuple[Path, Path], tmp_path: Path) -> None:
+def test_missing_session_file(
+    days: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     with pytest.raises(SessionError, match="no such session file"):
         load_session(tmp_path / "nothing.npz")
+    _, day2 = days
+    out = tmp_path / "r"
+    assert _run_resume(day2, tmp_path / "nothing.npz", out) == 2
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "cogmap run [" not in ln]
+    assert lines == [f"cogmap run: error: {tmp_path / 'nothing.npz'}: no such session file"]
+    assert not out.exists()
 
 
 # ------------------------------------------------------------------ the format knows every field
