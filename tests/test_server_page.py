@@ -394,7 +394,10 @@ def test_open_another_bag_from_the_page(
             (str(tmp_path / "nope.bag"), "nope.bag does not exist"),
             (str(tmp_path), "is a folder, not a .bag file"),
             (str(tmp_path / "notes.txt"), "is not a .bag file"),
-            (str(tmp_path / "broken.bag"), "not opened: "),
+            (
+                str(tmp_path / "broken.bag"),
+                f"not opened: {tmp_path / 'broken.bag'} has a damaged bag header; it is corrupt",
+            ),
         ):
             app.bag_box.value = typed
             app.open_button.value = True

@@ -499,6 +499,32 @@ def test_bad_input_is_one_line_and_exit_2(extra, message, tmp_path: Path, capsys
     assert not out.exists()  # rejected before anything is written
 
 
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("missing.toml", None, "missing.toml: no such spec file"),
+        ("spec.txt", "delta = 1", "spec.txt: spec files are .toml, .yaml, .yml or .json"),
+        ("spec.json", "[1]", 'spec.json: expected a table of parameters, e.g. delta = "2:8:13"'),
+        (
+            "spec.toml",
+            "parameters = 3",
+            "spec.toml: 'parameters' must be a table of parameter = values",
+        ),
+        ("spec.toml", "delta = [", "spec.toml: not a readable spec file ("),
+    ],
+)
+def test_a_bad_spec_file_is_one_line_and_exit_2(name, content, message, tmp_path: Path, capsys):
+    spec = tmp_path / name
+    if content is not None:
+        spec.write_text(content)
+    out = tmp_path / "sweep"
+    assert main(["sweep", str(RECORDED), "--out", str(out), "--spec", str(spec)]) == 2
+    line = _error_line(capsys)
+    # (a TOML error is followed by the parser's own words)
+    assert line.startswith(f"cogmap sweep: error: {tmp_path / message}"), line
+    assert not out.exists()
+
+
 def test_unreachable_scheduler_and_bad_bags(tmp_path: Path, capsys):
     out = tmp_path / "sweep"
     code = main(
