@@ -646,13 +646,16 @@ class MapLayer:
             self._false_key = false_key
 
     def update_paths(
-        self, truth: FloatArray | None, odometry: FloatArray | None, show_odometry: bool
+        self, truth: NDArray[np.float32] | None, odometry: NDArray[np.float32] | None
     ) -> None:
-        """The ground-truth path (raw frame) and the dead-reckoned one (map frame)."""
+        """Show the true path (raw frame) and the dead-reckoned one (map frame).
+
+        Both come as segments (:func:`path_segments`), made once per publish for every map.
+        """
         if truth is not None:
-            self.truth.sync(path_segments(truth, GROUND_TRUTH_Z))
-        if odometry is not None and show_odometry:
-            self.odometry.sync(path_segments(odometry, ODOMETRY_Z))
+            self.truth.sync(truth)
+        if odometry is not None:
+            self.odometry.sync(odometry)
 
     def reset(self) -> None:
         """Forget what was sent and remove the map's content (the frames stay)."""
@@ -784,6 +787,10 @@ class SceneStreamer:
         """Send what changed in the maps viewers show (the others when they are shown)."""
         started = time.perf_counter()
         truth = self._truth_poses(ground_truth, ground_truth_count)
+        truth_segments = None if truth is None else path_segments(truth, GROUND_TRUTH_Z)
+        odometry_segments = None
+        if odometry is not None and self.show_odometry:
+            odometry_segments = path_segments(odometry, ODOMETRY_Z)
         with self.server.atomic():
             for mode in sorted(self.needed & set(maps), key=lambda m: m.value):
                 layer = self.layers[mode]
@@ -793,7 +800,7 @@ class SceneStreamer:
                     None if extras is None else extras.get(mode),
                     duration,
                 )
-                layer.update_paths(truth, odometry, self.show_odometry)
+                layer.update_paths(truth_segments, odometry_segments)
             self._place()
         self.stats.updates += 1
         self.stats.seconds += time.perf_counter() - started
