@@ -294,9 +294,8 @@ class ClientView:
             if self.state.pin_display == "under":
                 out["pinned"] = 0.0
             else:
-                widest = self.app.streamer.side_by_side_step(shown)
                 pinned_width = _extent_width(self.pinned.snapshot)
-                out["pinned"] = step * (len(shown) - 1) + max(widest, pinned_width + 0.5)
+                out["pinned"] = step * (len(shown) - 1) + max(step, pinned_width + 0.5)
         return out
 
     def apply(self, reframe: bool = False) -> None:
