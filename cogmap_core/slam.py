@@ -555,7 +555,7 @@ class SlamSession:
     def process(self, frame: Frame | EventStep) -> FrameOutput:
         """Log one frame's events (the front end's, or a step's own) and apply them to every map."""
         if isinstance(frame, EventStep):
-            events: list[MapEvent] = list(frame.events)
+            events: Sequence[MapEvent] = frame.events
             scores: Sequence[float | None] = frame.link_scores
             view_template = None
         else:

@@ -437,16 +437,16 @@ def log_steps(
     # velocities of sample i hold over (t_{i-1}, t_i]
     sample = np.minimum(np.searchsorted(t_odo, times, side="left"), t_odo.size - 1)
     interval = np.diff(t_odo, prepend=t_odo[0])[sample]
-    dt = np.diff(times, prepend=times[0])
+    raw_dt = np.diff(times, prepend=times[0])
     gap = interval > cfg.max_odometry_gap
-    dt = np.where(gap, 0.0, dt)
+    dt = np.where(gap, 0.0, raw_dt)
     translation = odo[sample, 1] * dt
     rotation = odo[sample, 2] * dt
     travelled = np.cumsum(np.abs(translation))
     stats = LogStats(
         frames=int(times.size),
         loop_candidates=int(loops.shape[0]),
-        odometry_gaps=int(np.count_nonzero(gap & (np.diff(times, prepend=times[0]) > 0))),
+        odometry_gaps=int(np.count_nonzero(gap & (raw_dt > 0))),
     )
     truth = None
     if log.ground_truth is not None:
