@@ -153,12 +153,8 @@ def _sweep(args: argparse.Namespace) -> int:
     for path in paths:
         frontend = None if path.suffix == ".npz" else frontend_from_args(args, path)
         sources.append(bag_source(path, frontend, topics))
-    bars: list[ProgressBar] = []
-
-    def frame_progress(label: str) -> ProgressBar:
-        bar = ProgressBar(f"cogmap sweep: {label}")
-        bars.append(bar)
-        return bar
+    def frame_progress(label: str) -> ProgressBar:  # (prepare_events closes it)
+        return ProgressBar(f"cogmap sweep: {label}")
 
     sweep = Sweep(sources, Path(args.out), options, say=_say, frame_progress=frame_progress)
     progress = CellProgress(len(sweep.cells))
@@ -174,8 +170,6 @@ def _sweep(args: argparse.Namespace) -> int:
         raise
     finally:
         progress.close()
-        for bar in bars:
-            bar.close()
     print(summary_text(result))
     return 0
 
