@@ -153,6 +153,7 @@ def _sweep(args: argparse.Namespace) -> int:
     for path in paths:
         frontend = None if path.suffix == ".npz" else frontend_from_args(args, path)
         sources.append(bag_source(path, frontend, topics))
+
     def frame_progress(label: str) -> ProgressBar:  # (prepare_events closes it)
         return ProgressBar(f"cogmap sweep: {label}")
 
