@@ -23,7 +23,7 @@ import viser
 from websockets.sync.client import ClientConnection, connect
 
 from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
-from app.server.export import g2o_bytes, save_html_replay, summary_dict
+from app.server.export import g2o_bytes, save_html_replay, summary_dict, summary_inputs
 from app.server.figures import truth_transform
 from app.server.replay import PARAMS_USED, PlaybackState
 from cogmap_core.cognitive_map import MapMode
@@ -338,7 +338,13 @@ def test_exports(short_bag: Path, reference: SlamSession, tmp_path: Path) -> Non
         path = tmp_path / "compact.g2o"
         with app.replay.lock:
             path.write_bytes(g2o_bytes(app.replay.session.maps[MapMode.COMPACT]))
-            summary = summary_dict(app.replay)
+            inputs = summary_inputs(app.replay)
+        summary = summary_dict(inputs)  # computed outside the lock, from a copy:
+        live = app.replay.session.maps[MapMode.STANDARD]
+        saved_poses = live.graph.pose.copy()
+        live.graph.pose[:, :2] *= 2.0  # the replay going on cannot change it
+        assert summary_dict(inputs) == summary
+        live.graph.pose[:] = saved_poses
         graph = read_g2o(path)
         assert graph.num_vertices == compact.num_vertices
         assert graph.num_edges == compact.num_edges

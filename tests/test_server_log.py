@@ -12,7 +12,7 @@ import pytest
 from app.cli import main
 from app.server import export
 from app.server.app import CogmapApp, recent_links
-from app.server.export import summary_dict
+from app.server.export import summary_dict, summary_inputs
 from app.server.figures import false_link_label, layout_radius_label
 from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import MapMode
@@ -73,7 +73,7 @@ def test_a_log_replays_with_link_scores_and_no_camera(
         ]
         assert {s for _, _, s in expected} <= {0.9, 0.95}  # the place recognition's scores
         with r.lock:
-            summary = summary_dict(r)
+            summary = summary_dict(summary_inputs(r))
         assert summary["source"]["format"] == "tuc"
         assert summary["maps"]["compact"]["vertices"] == compact.num_vertices
         assert summary["loop_closures"]["tolerance_deg"] is None

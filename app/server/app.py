@@ -40,6 +40,7 @@ from app.server.export import (
     save_html_replay,
     sizes_csv_bytes,
     summary_bytes,
+    summary_inputs,
 )
 from app.server.figures import (
     FigureInputs,
@@ -1132,14 +1133,17 @@ class CogmapApp:
 
     def _download(self, client: viser.ClientHandle | None, what: str) -> None:
         try:
+            inputs = None
             with self.replay.lock:
                 mode = self._view_of(client)[0]
                 if what == "g2o":
                     name, content = f"{mode.value}.g2o", g2o_bytes(self.replay.session.maps[mode])
                 elif what == "summary":
-                    name, content = "summary.json", summary_bytes(self.replay)
+                    inputs = summary_inputs(self.replay)  # a copy: its figures need no lock
                 else:
                     name, content = "sizes.csv", sizes_csv_bytes(self.replay)
+            if inputs is not None:
+                name, content = "summary.json", summary_bytes(inputs)
         except Exception as exc:
             traceback.print_exc()
             self.export_md.content = self._export_message(f"export failed: {exc}", error=True)
