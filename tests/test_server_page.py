@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 import viser
 
+import app.server.replay as replay_module
 from app.server.chart import OFF_CHART, chart_data
 from app.server.params import SPECS, format_value, parse_typed
 from app.server.replay import PlaybackState
@@ -379,7 +380,7 @@ def test_cluster_log_is_an_html_table(short_bag: Path, reference: SlamSession) -
 
 # ---------------------------------------------------------------------------- bags, exports
 def test_open_another_bag_from_the_page(
-    short_bag: Path, reference: SlamSession, tmp_path: Path
+    short_bag: Path, reference: SlamSession, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     other = tmp_path / "copy.bag"
     shutil.copy(short_bag, other)
@@ -404,6 +405,14 @@ def test_open_another_bag_from_the_page(
             message = html.unescape(app.open_md.content)
             assert said in message and "cogmap-error" in message, typed
             assert app.replay is first and first.alive
+        opened_by_replays: list[Path] = []
+        real_open_source = replay_module.open_source
+
+        def counting_open_source(path: Path, *args: object, **kwargs: object) -> object:
+            opened_by_replays.append(Path(path))
+            return real_open_source(path, *args, **kwargs)  # type: ignore[arg-type]
+
+        monkeypatch.setattr(replay_module, "open_source", counting_open_source)
         app.bag_box.value = str(other)
         app.open_button.value = True
         assert f"opened {other}" in html.unescape(app.open_md.content)
@@ -412,6 +421,7 @@ def test_open_another_bag_from_the_page(
         assert app.replay.lock is first.lock
         wait(app)
         assert app.replay.bag_path == other and app.replay.state is PlaybackState.ENDED
+        assert opened_by_replays == []  # the page's check opened it; the replay used that reader
         for mode in MapMode:
             assert_same_map(app.replay.session.maps[mode], reference.maps[mode])
         assert "copy.bag" in app.status_html.content

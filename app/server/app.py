@@ -75,7 +75,7 @@ from cogmap_core.event_file import KIND_LINK
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, EventLog, SlamSession
-from cogmap_core.sources.detect import KINDS, LogOptions
+from cogmap_core.sources.detect import KINDS, LogOptions, Source
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -254,6 +254,7 @@ class CogmapApp:
         fmt: str | None = None,
         log: LogOptions | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
+        opened: Source | None = None,
     ) -> Replay:
         return Replay(
             bag,
@@ -269,6 +270,7 @@ class CogmapApp:
             log=log,
             resume=resume,
             lock=self._replay_lock,
+            opened=opened,
         )
 
     def _reset_label(self) -> str:
@@ -1202,10 +1204,11 @@ class CogmapApp:
             problem = f"{path} is not a .bag file (ROS 1 bag)"
         elif not os.access(path, os.R_OK):
             problem = f"{path} is not readable"
+        reader = None
         if problem is None:
-            try:
-                with open_bag(path, topics=self._topics, image_scale=self._image_scale) as reader:
-                    frames = reader.info.frame_count
+            try:  # opened once here, to refuse it before the running replay stops; then handed over
+                reader = open_bag(path, topics=self._topics, image_scale=self._image_scale)
+                frames = reader.info.frame_count
                 if frames == 0:
                     problem = f"{path} has no camera frames on the image topic"
             except CogmapError as exc:
@@ -1213,8 +1216,11 @@ class CogmapApp:
             except Exception as exc:
                 problem = f"cannot open {path}: {type(exc).__name__}: {exc}"
         if problem is not None:
+            if reader is not None:
+                reader.close()
             self._open_message(f"not opened: {problem}", error=True)
             return False
+        assert reader is not None
         with self._switch_lock:
             old = self.replay
             params = old.params
@@ -1230,7 +1236,7 @@ class CogmapApp:
                 self._false_key = None
                 self._false_times = np.zeros(0)
                 self._odometry_key = None
-                self.replay = self._make_replay(path, params, speed, True)
+                self.replay = self._make_replay(path, params, speed, True, opened=reader)
                 self.started_at = time.monotonic()
                 self.links_html.content = ""  # (a log's latest links)
             self.views_changed()

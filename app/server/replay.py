@@ -210,12 +210,14 @@ class Replay:
         log: LogOptions | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
         lock: threading.RLock | None = None,
+        opened: Source | None = None,
     ) -> None:
         """Set up the replay (nothing is read until :meth:`start`).
 
         ``lock`` guards the worker-owned state; an app that swaps replays passes one lock to
         all of them, so a reader that took ``app.replay.lock`` holds the lock of the replay it
-        then finds in ``app.replay``.
+        then finds in ``app.replay``. ``opened`` is the input ``bag`` already open (a caller that
+        checked it hands it over instead of having it opened twice); the replay closes it.
         """
         self.bag_source = bag
         self.format = fmt
@@ -260,6 +262,7 @@ class Replay:
         self.message = "opening the bag"
         self.bag_path: Path | None = None
         self.reader: Source | None = None
+        self._opened = opened  # handed over by the caller, used by _open
         self.duration = 0.0
         self.total_frames = 0
         # per frame of the bag, the view template it matched (-1: none); 8 bytes a frame
@@ -290,6 +293,9 @@ class Replay:
             self._cond.notify_all()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout)
+        elif self._thread is None and self._opened is not None:  # never started: nobody else will
+            self._opened.close()
+            self._opened = None
         self.builder.close()
 
     @property
@@ -449,6 +455,9 @@ class Replay:
         self._close_pass()
         if self.reader is not None:
             self.reader.close()
+        if self._opened is not None:  # stopped before it was used
+            self._opened.close()
+            self._opened = None
 
     def _update_state_locked(self) -> None:
         state = self.state
@@ -504,9 +513,15 @@ class Replay:
                     f"{path} is a log of odometry and place recognition ({fmt}): sessions are "
                     "for bags; replay it without a session to resume"
                 )
-            reader = open_source(
-                path, fmt, topics=self.topics, image_scale=self.image_scale, log=self.log_options
-            )
+            reader, self._opened = self._opened, None
+            if reader is None:
+                reader = open_source(
+                    path,
+                    fmt,
+                    topics=self.topics,
+                    image_scale=self.image_scale,
+                    log=self.log_options,
+                )
             self.has_camera = KINDS[fmt].has_camera
             if self.session.log.frames == 0:  # the front end is chosen for the input
                 self._choose_frontend(path, fmt)
