@@ -11,6 +11,7 @@ import math
 import os
 import re
 import shutil
+import threading
 import time
 from pathlib import Path
 
@@ -20,6 +21,7 @@ import pytest
 import viser
 
 import app.server.replay as replay_module
+import app.server.view as view_module
 from app.server.chart import OFF_CHART, chart_data
 from app.server.params import SPECS, format_value, parse_typed
 from app.server.replay import PlaybackState
@@ -227,6 +229,36 @@ def test_a_seek_note_lasts_until_the_next_typed_seek(short_bag: Path) -> None:
             until(lambda: app.replay.frame_time <= 1.05)
             app._update_status(force=True)
             assert "cogmap-message" not in app.status_html.content
+
+
+def test_a_tab_closed_while_its_page_is_built_leaves_no_view_and_no_error(
+    short_bag: Path, monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]
+) -> None:
+    building, leave = threading.Event(), threading.Event()
+    real_apply = view_module.ClientView.apply
+
+    def slow_first_apply(self: view_module.ClientView, *args: object, **kwargs: object) -> None:
+        if not building.is_set():
+            building.set()
+            leave.wait(10)  # the tab closes here, while the page is being built
+        real_apply(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(view_module.ClientView, "apply", slow_first_apply)
+    with running_app(short_bag) as app:
+        wait(app)
+        capfd.readouterr()
+        with hello(app.server.get_port()):
+            assert building.wait(10)
+        until(lambda: not app.server.get_clients())
+        leave.set()
+        until(lambda: not app._connect_lock.locked())
+        time.sleep(0.2)  # (viser prints a failed callback from its own thread)
+        assert app.views == {}  # no view kept for a tab that is gone
+        printed = capfd.readouterr()
+        assert "Task failed" not in printed.out + printed.err
+        assert "removed" not in printed.out + printed.err
+        with hello(app.server.get_port()):  # the next tab gets its page
+            until(lambda: len(app.views) == 1)
 
 
 def test_the_replay_waits_for_the_first_viewer(short_bag: Path) -> None:

@@ -481,7 +481,15 @@ class CogmapApp:
             self.replay.play()
             self._sync_play_button()
         with self._connect_lock:  # (the shared folders are entered to place the view's controls)
-            view = ClientView(self, client)
+            try:
+                view = ClientView(self, client)
+            except RuntimeError:  # viser refuses updates to a tab that has gone
+                if self._connected(client):
+                    raise
+                return
+            if not self._connected(client):  # it left while its page was built
+                view.close()
+                return
             self.views[client.client_id] = view
         r = self.replay
         if not math.isnan(r.frame_time) and r.frame_time > LATE_JOIN_S and r.playing:
@@ -495,8 +503,12 @@ class CogmapApp:
                 )
         self._update_status(force=True)
 
+    def _connected(self, client: viser.ClientHandle) -> bool:
+        return client.client_id in self.server.get_clients()
+
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
-        view = self.views.pop(client.client_id, None)
+        with self._connect_lock:  # a view being built is registered (or dropped) first
+            view = self.views.pop(client.client_id, None)
         if view is not None:
             view.close()
             self.views_changed()
