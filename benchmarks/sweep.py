@@ -116,7 +116,7 @@ def main() -> None:
     )
     spec = sweep_spec({"delta": args.delta, "t_interval": args.t_interval})
     options = SweepOptions(spec=spec)
-    sweep = Sweep([source], out, options)
+    sweep = Sweep([source], out, options)  # planned once: run serially, then on Dask below
     cells = sweep.cells
     print(f"{len(sweep.settings)} settings of delta x T_interval + the paper's: {len(cells)} cells")
 
@@ -134,7 +134,7 @@ def main() -> None:
     connection = connect_local()
     startup_s = time.perf_counter() - started
     try:
-        sweep = Sweep([source], out, options, client=connection.client)
+        sweep.client = connection.client  # the same cells, now on the cluster
         meter = CpuMeter()
         result = sweep.run()
         dask_s, dask_own, dask_other = meter.stop()
