@@ -11,6 +11,7 @@ import argparse
 import json
 import sys
 import tomllib
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -175,11 +176,23 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
-def _setting(entry: dict[str, Any], swept: list[str]) -> str:
+def setting_text(entry: Mapping[str, Any], swept: Sequence[str]) -> str:
+    """One setting of ``best.json`` as its swept parameters, e.g. ``delta=3.746 t_interval=2``.
+
+    Args:
+        entry: an entry of ``best.json`` (its ``params`` holds every map parameter).
+        swept: the parameters to show, in order (``best.json``'s ``swept``).
+
+    """
     return " ".join(f"{name}={entry['params'][name]:.4g}" for name in swept)
 
 
-def _figures(entry: dict[str, Any]) -> str:
+def figures_text(entry: Mapping[str, Any]) -> str:
+    """The figures of an entry of ``best.json``: vertices, ATE, completeness and correctness.
+
+    A figure the entry lacks (``None``) is shown as ``-``.
+    """
+
     def fmt(value: float | None, spec: str) -> str:
         return "-" if value is None else format(value, spec)
 
@@ -198,7 +211,7 @@ def summary_text(result: SweepResult) -> str:
     front = best["front_ate"]
     shown = front if len(front) <= 12 else front[:6] + front[-6:]
     entries = [e for e in [paper, smallest, *shown] if e]
-    width = max([len(_setting(e, swept)) for e in entries] + [10])
+    width = max([len(setting_text(e, swept)) for e in entries] + [10])
     label = f"smallest, compl >= {best['min_completeness']:g}"
     pad = max(len(label), 8)
     lines = [
@@ -208,21 +221,25 @@ def summary_text(result: SweepResult) -> str:
         + ")"
     ]
     if paper:
-        lines.append(f"{'paper':{pad}}  {_setting(paper, swept):{width}}  {_figures(paper)}")
+        lines.append(
+            f"{'paper':{pad}}  {setting_text(paper, swept):{width}}  {figures_text(paper)}"
+        )
     if smallest:
-        lines.append(f"{label:{pad}}  {_setting(smallest, swept):{width}}  {_figures(smallest)}")
+        lines.append(
+            f"{label:{pad}}  {setting_text(smallest, swept):{width}}  {figures_text(smallest)}"
+        )
     else:
         lines.append(f"{label:{pad}}  none reaches it")
     lines.append(f"Pareto front, vertices vs ATE ({len(front)} settings):")
     for k, entry in enumerate(shown):
         if len(front) > 12 and k == 6:
             lines.append(f"{'':{pad}}  ... {len(front) - 12} more in best.json")
-        lines.append(f"{'':{pad}}  {_setting(entry, swept):{width}}  {_figures(entry)}")
+        lines.append(f"{'':{pad}}  {setting_text(entry, swept):{width}}  {figures_text(entry)}")
     beat = best["beat_paper"]
     lines.append(
         f"{len(beat)} settings have fewer vertices than the paper's and no worse ATE, "
         "completeness and correctness"
-        + (f" (smallest: {_setting(beat[0], swept)})" if beat else "")
+        + (f" (smallest: {setting_text(beat[0], swept)})" if beat else "")
     )
     lines.append(f"written: {', '.join(str(p) for p in result.files)}")
     return "\n".join(lines)

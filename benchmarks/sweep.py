@@ -31,6 +31,7 @@ from typing import Any
 
 import psutil
 
+from app.cmd_sweep import figures_text, setting_text
 from app.sweep import (
     ResultsTable,
     Sweep,
@@ -45,18 +46,6 @@ from cogmap_core.datasets import BagTopics
 from cogmap_core.datasets.cache import default_dataset_path
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.sweep import FIGURE_COLUMNS, sweep_spec
-
-
-def _setting(entry: dict[str, Any]) -> str:
-    p = entry["params"]
-    return f"delta={p['delta']:.4g} T_interval={p['t_interval']:.3g}"
-
-
-def _figures(entry: dict[str, Any]) -> str:
-    return (
-        f"V {entry['vertices']:5.0f}  ATE {entry['ate_m']:.4f} m  completeness "
-        f"{entry['completeness']:.4f}  correctness {entry['correctness']:.4f}"
-    )
 
 
 class CpuMeter:
@@ -116,7 +105,7 @@ def main() -> None:
     )
     spec = sweep_spec({"delta": args.delta, "t_interval": args.t_interval})
     options = SweepOptions(spec=spec)
-    sweep = Sweep([source], out, options)
+    sweep = Sweep([source], out, options)  # planned once: run serially, then on Dask below
     cells = sweep.cells
     print(f"{len(sweep.settings)} settings of delta x T_interval + the paper's: {len(cells)} cells")
 
@@ -134,7 +123,7 @@ def main() -> None:
     connection = connect_local()
     startup_s = time.perf_counter() - started
     try:
-        sweep = Sweep([source], out, options, client=connection.client)
+        sweep.client = connection.client  # the same cells, now on the cluster
         meter = CpuMeter()
         result = sweep.run()
         dask_s, dask_own, dask_other = meter.stop()
@@ -168,25 +157,26 @@ def main() -> None:
     )
 
     best = json.loads((out / "best.json").read_text())
+    swept = best["swept"]
     paper = best["paper"]
     print(f"\nPareto front on the default dataset ({out / 'pareto.png'}):")
-    print(f"  paper's setting      {_setting(paper):36} {_figures(paper)}")
+    print(f"  paper's setting      {setting_text(paper, swept):36} {figures_text(paper)}")
     smallest = best["smallest_complete"]
     if smallest:
-        print(f"  smallest, compl>=.98 {_setting(smallest):36} {_figures(smallest)}")
+        print(f"  smallest, compl>=.98 {setting_text(smallest, swept):36} {figures_text(smallest)}")
     print(f"  front vertices vs ATE ({len(best['front_ate'])} settings):")
     for entry in best["front_ate"]:
-        print(f"    {_setting(entry):53} {_figures(entry)}")
+        print(f"    {setting_text(entry, swept):53} {figures_text(entry)}")
     print(f"  front vertices vs completeness ({len(best['front_completeness'])} settings):")
     for entry in best["front_completeness"]:
-        print(f"    {_setting(entry):53} {_figures(entry)}")
+        print(f"    {setting_text(entry, swept):53} {figures_text(entry)}")
     beat = best["beat_paper"]
     print(
         f"  {len(beat)} settings have fewer vertices than the paper's and no worse ATE, "
         "completeness and correctness; the 10 smallest:"
     )
     for entry in beat[:10]:
-        print(f"    {_setting(entry):53} {_figures(entry)}")
+        print(f"    {setting_text(entry, swept):53} {figures_text(entry)}")
 
     quiet = max(serial_other, dask_other) < 0.15
     checks = [

@@ -350,34 +350,7 @@ def sweep_spec(
 
 
 SPEC_FILE_KEYS = ("samples", "seed")
-
-
-def spec_from_mapping(data: Mapping[str, Any], where: str = "spec") -> SweepSpec:
-    """A sweep from a spec file's content: ``{parameter: values, samples?: N, seed?: S}``.
-
-    Values are strings in the command-line syntax, numbers, or lists of numbers. A top-level
-    ``parameters`` table may hold the parameters instead.
-
-    Raises:
-        ParameterError: not a mapping, an unknown key or parameter, or a bad range (the message
-            names ``where``).
-
-    """
-    if not isinstance(data, Mapping):
-        raise ParameterError(f"{where}: expected a table of parameters, e.g. delta = '2:8:13'")
-    values: dict[str, Any] = {}
-    table = data.get("parameters", {})
-    if not isinstance(table, Mapping):
-        raise ParameterError(f"{where}: 'parameters' must be a table of parameter = values")
-    values.update(table)
-    for key, value in data.items():
-        if key in SPEC_FILE_KEYS or key == "parameters":
-            continue
-        values[key] = value
-    try:
-        return sweep_spec(values, data.get("samples"), data.get("seed", 0))
-    except ParameterError as exc:
-        raise ParameterError(f"{where}: {exc}") from None
+"""Keys of a spec file that are not map parameters (the random search's)."""
 
 
 # --------------------------------------------------------------------------- one cell

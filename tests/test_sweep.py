@@ -35,6 +35,7 @@ from cogmap_core.slam import EventLog
 from cogmap_core.sweep import (
     FIGURE_COLUMNS,
     SettingFigures,
+    SweepSpec,
     beats,
     evaluate_cell,
     front_ate,
@@ -42,7 +43,6 @@ from cogmap_core.sweep import (
     pareto_mask,
     parse_parameter,
     smallest_complete,
-    spec_from_mapping,
     sweep_spec,
 )
 
@@ -148,20 +148,24 @@ def test_random_search_is_seeded_and_stays_in_range():
 
 
 def test_spec_files_toml_and_yaml(tmp_path: Path):
-    from app.cmd_sweep import read_spec_file
+    from app.cmd_sweep import read_spec_file, spec_from_args
+
+    def spec_file(path: Path) -> SweepSpec:  # what `cogmap sweep --spec PATH` sweeps
+        args = build_parser().parse_args(["sweep", "--out", str(tmp_path), "--spec", str(path)])
+        return spec_from_args(args)
 
     toml = tmp_path / "grid.toml"
     toml.write_text('delta = "2:8:4"\nt_interval = [1, 2]\n')
-    spec = spec_from_mapping(read_spec_file(toml))
+    spec = spec_file(toml)
     assert len(spec.settings()) == 8 and spec.samples is None
     yaml_file = tmp_path / "random.yaml"
     yaml_file.write_text("samples: 5\nseed: 3\nparameters:\n  delta: '2:8'\n  beta: [5, 10]\n")
-    spec = spec_from_mapping(read_spec_file(yaml_file), str(yaml_file))
+    spec = spec_file(yaml_file)
     assert spec.samples == 5 and spec.seed == 3 and len(spec.settings()) == 5
     bad = tmp_path / "bad.toml"
     bad.write_text('gamma = "1:2:3"\n')
     with pytest.raises(ParameterError, match=r"bad.toml: unknown map parameter 'gamma'"):
-        spec_from_mapping(read_spec_file(bad), str(bad))
+        spec_file(bad)
     broken = tmp_path / "broken.toml"
     broken.write_text("delta = [1,\n")
     with pytest.raises(InputFileError, match="broken.toml: not a readable spec file"):
