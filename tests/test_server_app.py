@@ -657,16 +657,21 @@ def test_bad_gui_values_are_refused_before_any_client_sees_them(
             assert sent == ["standard.g2o"]  # the map this viewer shows
 
 
+def _shared_values(app: CogmapApp) -> dict[str, object]:
+    """The values of the shared controls a rogue client tries to change."""
+    return {
+        "alpha": app.param_sliders["alpha"].value,
+        "delta": app.param_sliders["delta"].value,
+        "seek": app.seek_slider.value,
+        "speed": app.speed_dropdown.value,
+        "box": app.param_boxes["delta"].value,
+    }
+
+
 def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Path) -> None:
     with running_app(short_bag, autoplay=False) as app:
         wait(app)
-        before = {
-            "alpha": app.param_sliders["alpha"].value,
-            "delta": app.param_sliders["delta"].value,
-            "seek": app.seek_slider.value,
-            "speed": app.speed_dropdown.value,
-            "box": app.param_boxes["delta"].value,
-        }
+        before = _shared_values(app)
         refused = app.gate.refused
         with _client(app.server.get_port()) as ws:  # never says hello
             _send(ws, app.param_sliders["alpha"], {"value": 1e308})
@@ -678,14 +683,7 @@ def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Pa
             while app.gate.refused < refused + 5 and time.monotonic() < deadline:
                 time.sleep(0.01)
         assert app.gate.refused == refused + 5
-        after = {
-            "alpha": app.param_sliders["alpha"].value,
-            "delta": app.param_sliders["delta"].value,
-            "seek": app.seek_slider.value,
-            "speed": app.speed_dropdown.value,
-            "box": app.param_boxes["delta"].value,
-        }
-        assert after == before
+        assert _shared_values(app) == before
         assert app.replay.params == MapParams()
         # what a client joining later receives: the values in force
         assert _buffered(app, app.param_sliders["alpha"]) in (None, before["alpha"])
