@@ -36,7 +36,6 @@ def _run(args: argparse.Namespace) -> int:
     kind = input_kind(args, bag)
     camera = kind.has_camera
     options = RunOptions(
-        params=kind.map_params.with_changes(**changes),  # the input kind's defaults + options
         frontend=frontend_from_args(args, bag) if camera else None,
         topics=topics_from_args(args),
         force=args.force,

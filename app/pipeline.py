@@ -22,7 +22,6 @@ import numpy as np
 from app.plots import map_figure, save_png, size_figure
 from app.report import ReportFolder
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
-from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError, OutputError, ParameterError
@@ -57,8 +56,6 @@ class RunOptions:
     """Everything that defines a headless run besides the input (a bag or a log).
 
     Attributes:
-        params: map parameters of a new session (the caller starts them from the input kind's
-            defaults: :attr:`~cogmap_core.sources.detect.InputKind.map_params`).
         frontend: front-end settings (None: iRat defaults + the bag's profile; unused for logs).
         topics: the bag's topics (None: the iRat bag's).
         image_scale: JPEG decode reduction.
@@ -69,15 +66,15 @@ class RunOptions:
         until_error: a bag corrupt part-way: map what comes before the damage (bags only).
         resume: continue the session saved in this file (its front end, maps and data time);
             the bag's frames follow the session's as if the bags were one (bags only).
-        param_changes: with ``resume``, map parameters that replace the session's (its maps
-            are then rebuilt from its events).
+        param_changes: map parameters that replace the input kind's defaults
+            (:attr:`~cogmap_core.sources.detect.InputKind.map_params`) for a new session, or
+            with ``resume`` the session's own (its maps are then rebuilt from its events).
         save_session: write the session to this file at the end of the data (before the final
             optimisation, so that a resumed run continues exactly where this one stopped; bags
             only).
 
     """
 
-    params: MapParams = field(default_factory=MapParams)
     frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
     topics: BagTopics | None = None
     image_scale: int = 4
@@ -340,19 +337,17 @@ class HeadlessPipeline:
         if options.save_session is not None:
             check_session_target(options.save_session, options.force)
         self.meta: SessionMeta | None = None
-        if options.resume is not None:
-            self.session = self._resume(options.resume)
-        else:
-            self.session = SlamSession(
-                options.params, self.frontend, evaluation=self.kind.evaluation
-            )
+        self.session: SlamSession  # set by run(), once the output folder is checked
 
-    def _resume(self, path: Path) -> SlamSession:
-        """Load the session to continue (refused before anything is written)."""
+    def _start_session(self) -> SlamSession:
+        """A new session, or the one ``resume`` names (loaded after the output is checked)."""
+        changes = self.options.param_changes
+        if self.options.resume is None:
+            params = self.kind.map_params.with_changes(**changes)
+            return SlamSession(params, self.frontend, evaluation=self.kind.evaluation)
+        path = self.options.resume
         started = wallclock.perf_counter()
-        session, meta = resume_session(
-            path, self.frontend, self.options.image_scale, self.options.param_changes
-        )
+        session, meta = resume_session(path, self.frontend, self.options.image_scale, changes)
         self.meta = meta
         self.session_notes.append(
             f"resumed {path} in {wallclock.perf_counter() - started:.2f} s: "
@@ -366,6 +361,7 @@ class HeadlessPipeline:
             self._open_source() as reader,
             ReportFolder(self.out_dir, REPORT_FILES, self.options.force) as report,
         ):
+            self.session = self._start_session()
             offset = 0.0
             if isinstance(reader, BagReader):  # a bag: what a session needs to know of it
                 log = self.session.log

@@ -174,8 +174,9 @@ def test_map_cache_keys_on_the_parameters_a_map_uses() -> None:
 def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
     short_bag: Path, reference: SlamSession, tmp_path: Path
 ) -> None:
-    params = MapParams(delta=6.0, t_interval=1.0, t_total=40.0)
-    headless = HeadlessPipeline(short_bag, tmp_path / "run", RunOptions(params=params))
+    changes = {"delta": 6.0, "t_interval": 1.0, "t_total": 40.0}
+    params = MapParams(**changes)
+    headless = HeadlessPipeline(short_bag, tmp_path / "run", RunOptions(param_changes=changes))
     headless.run()
     with running_app(short_bag) as app:
         assert app.wait_idle(60)

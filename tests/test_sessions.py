@@ -374,6 +374,28 @@ def test_missing_session_file(
     assert not out.exists()
 
 
+def test_a_resumed_run_checks_its_output_folder_before_loading_the_session(
+    resumed: Path,
+    days: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import app.pipeline
+
+    loaded: list[Path] = []
+    monkeypatch.setattr(app.pipeline, "resume_session", lambda path, *_: loaded.append(path))
+    _, day2 = days
+    out = tmp_path / "r"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert _run_resume(day2, resumed / "day1.session.npz", out) == 2
+    err = capsys.readouterr().err
+    assert f"{out} is not empty; choose another --out" in err
+    assert loaded == []  # refused before the (possibly long) load and rebuild
+    assert [p.name for p in out.iterdir()] == ["notes.txt"]
+
+
 # ------------------------------------------------------------------ the format knows every field
 KNOWN_ATTRIBUTES: dict[type, set[str]] = {
     # saved, or rebuilt from what is saved (derived matrices, the mode's flags)
