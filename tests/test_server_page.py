@@ -274,6 +274,33 @@ def test_the_replay_waits_for_the_first_viewer(short_bag: Path) -> None:
 
 
 # ---------------------------------------------------------------------------- views
+def test_a_viewers_change_counts_while_its_view_sets_controls_on_another_thread(
+    short_bag: Path,
+) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        with hello(app.server.get_port()) as ws:
+            until(lambda: len(app.views) == 1)
+            view = next(iter(app.views.values()))
+            setting, release = threading.Event(), threading.Event()
+
+            def the_view_setting_a_control() -> None:  # e.g. _on_camera unticking "follow"
+                view._setting.on = True
+                setting.set()
+                release.wait(10)
+                view._setting.on = False
+
+            worker = threading.Thread(target=the_view_setting_a_control)
+            worker.start()
+            try:
+                assert setting.wait(10)
+                send(ws, view.layer_checkboxes["odometry"], True)  # the viewer, meanwhile
+                until(lambda: view.state.layers["odometry"])
+            finally:
+                release.set()
+                worker.join()
+
+
 def test_each_viewer_has_its_own_view(short_bag: Path, reference: SlamSession) -> None:
     with running_app(short_bag) as app:
         wait(app)

@@ -168,7 +168,10 @@ class ClientView:
         self._camera_acknowledged = False
         self._log_key: tuple[Any, ...] | None = None
         self._compare_key: tuple[Any, ...] | None = None
-        self._setting = False
+        # set while this thread changes a control itself (its callback must not act on it); per
+        # thread: viser runs viewers' callbacks on a pool, and a viewer's own change arriving
+        # meanwhile on another thread must still count
+        self._setting = threading.local()
         self.closed = False
         self._build_gui()
         self._guard()
@@ -256,32 +259,34 @@ class ClientView:
             gate.guard(button, click())
 
     def _read_controls(self) -> None:
-        if self._setting:
+        if getattr(self._setting, "on", False):
             return
-        s = self.state
+        old = self.state
         labels = {v: k for k, v in COLOURING_LABELS.items()}
-        before = (s.shown, s.pin_display)
-        s.mode = MapMode(self.mode_dropdown.value)
-        s.compare = bool(self.compare_checkbox.value)
-        s.compare_mode = MapMode(self.compare_dropdown.value)
-        s.colouring = labels.get(self.colouring_dropdown.value, "cluster")
-        s.layers = {name: bool(box.value) for name, box in self.layer_checkboxes.items()}
-        s.pin_display = self.pin_dropdown.value
-        follow = bool(self.follow_checkbox.value)
-        refollow = follow and not s.follow
-        s.follow = follow
-        self.apply(reframe=refollow or (s.follow and before != (s.shown, s.pin_display)))
+        s = ViewState(
+            mode=MapMode(self.mode_dropdown.value),
+            compare=bool(self.compare_checkbox.value),
+            compare_mode=MapMode(self.compare_dropdown.value),
+            colouring=labels.get(self.colouring_dropdown.value, "cluster"),
+            layers={name: bool(box.value) for name, box in self.layer_checkboxes.items()},
+            follow=bool(self.follow_checkbox.value),
+            pin_display=self.pin_dropdown.value,
+        )
+        self.state = s  # one assignment: other threads see the old state or the new, whole
+        refollow = s.follow and not old.follow
+        moved = (old.shown, old.pin_display) != (s.shown, s.pin_display)
+        self.apply(reframe=refollow or (s.follow and moved))
 
     def set_mode(self, mode: MapMode, compare: MapMode | None = None) -> None:
         """Show ``mode`` (and ``compare`` beside it); as if the viewer chose it."""
-        self._setting = True
+        self._setting.on = True
         try:
             self.mode_dropdown.value = mode.value
             self.compare_checkbox.value = compare is not None
             if compare is not None:
                 self.compare_dropdown.value = compare.value
         finally:
-            self._setting = False
+            self._setting.on = False
         self._read_controls()
 
     # ================================================================== scene
@@ -290,11 +295,12 @@ class ClientView:
         shown = self.state.shown
         step = self.app.streamer.side_by_side_step(shown)
         out = {mode.value: step * k for k, mode in enumerate(shown)}
-        if self.pinned is not None:
+        pinned = self.pinned  # read once: another thread may unpin meanwhile
+        if pinned is not None:
             if self.state.pin_display == "under":
                 out["pinned"] = 0.0
             else:
-                pinned_width = _extent_width(self.pinned.snapshot)
+                pinned_width = _extent_width(pinned.snapshot)
                 out["pinned"] = step * (len(shown) - 1) + max(step, pinned_width + 0.5)
         return out
 
@@ -375,10 +381,9 @@ class ClientView:
         if s.layers["grid"]:
             parts.append("grid: 0.1 m cells, 1 m sections (scale bar: 1 m)")
         parts.append(f"{swatch((15, 15, 15))}robot")
-        if self.pinned is not None:
-            parts.append(
-                f"{swatch(PINNED_COLOR)}pinned {self.pinned.mode.value} map ({s.pin_display})"
-            )
+        pinned = self.pinned  # read once: another thread may unpin meanwhile
+        if pinned is not None:
+            parts.append(f"{swatch(PINNED_COLOR)}pinned {pinned.mode.value} map ({s.pin_display})")
         return '<div class="cogmap-note" id="cogmap-legend">' + "<br>".join(parts) + "</div>"
 
     # ================================================================== camera
@@ -387,8 +392,9 @@ class ClientView:
         offsets = self.offsets()
         shown = self.state.shown
         box = self.app.streamer.extent(shown, [offsets[m.value] for m in shown])
-        if self.pinned is not None and self.pinned.snapshot.poses.shape[0]:
-            p = self.pinned.snapshot.poses
+        pinned = self.pinned  # read once: another thread may unpin meanwhile
+        if pinned is not None and pinned.snapshot.poses.shape[0]:
+            p = pinned.snapshot.poses
             x = offsets.get("pinned", 0.0)
             pbox = (
                 float(p[:, 0].min()) + x,
@@ -466,11 +472,11 @@ class ClientView:
         if close:
             return
         self.state.follow = False
-        self._setting = True
+        self._setting.on = True
         try:
             self.follow_checkbox.value = False
         finally:
-            self._setting = False
+            self._setting.on = False
 
     # ================================================================== per-update content
     def refresh(self) -> None:
