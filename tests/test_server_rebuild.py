@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import app.server.replay as replay_module
 from app.pipeline import HeadlessPipeline, RunOptions
 from app.server.export import g2o_bytes
 from app.server.rebuild import (
@@ -172,7 +173,7 @@ def test_map_cache_keys_on_the_parameters_a_map_uses() -> None:
 
 
 def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
-    short_bag: Path, reference: SlamSession, tmp_path: Path
+    short_bag: Path, reference: SlamSession, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     changes = {"delta": 6.0, "t_interval": 1.0, "t_total": 40.0}
     params = MapParams(**changes)
@@ -208,9 +209,17 @@ def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
             if same_schedule(log, log.frames, True, MapParams(), MapParams(t_total=t))
         )
         before = dict(app.replay.session.maps.maps)
+        schedules: list[float] = []
+
+        def counted(*args: object) -> bool:
+            schedules.append(args[-1].t_total)  # type: ignore[attr-defined]
+            return same_schedule(*args)  # type: ignore[arg-type]
+
+        monkeypatch.setattr(replay_module, "same_schedule", counted)
         app.param_sliders["t_total"].value = kept
         assert app.wait_idle(60)
         assert app.replay.rebuilds[-1].how == {m: "kept" for m in MapMode}
+        assert schedules == [kept]  # compared once for the three maps' shared parameters
         for mode in MapMode:
             assert app.replay.session.maps[mode] is before[mode]
             assert app.replay.session.maps[mode].params.t_total == kept

@@ -823,12 +823,18 @@ class Replay:
             return
         log = self.session.log
         tasks = []
+        unchanged: dict[MapParams, bool] = {}  # per parameters in use (the maps mostly share)
         for mode in self._order():
             started = time.perf_counter()
             current = self.session.maps[mode]
-            if not needs_rebuild(mode, current.params, params) or same_schedule(
-                log, frames, finish, current.params, params
-            ):
+            keep = not needs_rebuild(mode, current.params, params)
+            if not keep:
+                if current.params not in unchanged:
+                    unchanged[current.params] = same_schedule(
+                        log, frames, finish, current.params, params
+                    )
+                keep = unchanged[current.params]
+            if keep:
                 cmap: CognitiveMap | None = current  # the change leaves this map as it is
                 with self.lock:
                     current.set_params(params)
