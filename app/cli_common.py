@@ -120,15 +120,6 @@ def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
     return changes
 
 
-def params_from_args(args: argparse.Namespace, base: MapParams | None = None) -> MapParams:
-    """Map parameters: ``base`` with the options given on the command line.
-
-    ``base`` is the input kind's defaults (the paper's by default); out-of-range values name the
-    valid range.
-    """
-    return (base or MapParams()).with_changes(**map_changes_from_args(args))
-
-
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     """``FILE`` (default: the built-in dataset), ``--format`` and a log's other files."""
     parser.add_argument(

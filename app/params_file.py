@@ -30,16 +30,6 @@ def split_entry(text: str) -> tuple[Path, str | None]:
     return Path(path), (entry if sep else None)
 
 
-def load_params_file(text: str) -> MapParams:
-    """The map parameters in ``FILE`` or ``FILE#ENTRY``, the paper's where it names none.
-
-    Raises:
-        InputFileError: see :func:`load_params_changes`.
-
-    """
-    return MapParams().with_changes(**load_params_changes(text))
-
-
 def load_params_changes(text: str) -> dict[str, float]:
     """The map parameters ``FILE`` or ``FILE#ENTRY`` names (see the module docstring), validated.
 
@@ -68,9 +58,7 @@ def load_params_changes(text: str) -> dict[str, float]:
         raise InputFileError(f"{path}: 'params' must be an object of parameter: value")
     try:
         MapParams.from_dict(values)  # unknown names and out-of-range values
-    except CogmapError as exc:
-        raise InputFileError(f"{path}: {exc}") from None
-    except TypeError as exc:  # a value of the wrong type
+    except (CogmapError, TypeError) as exc:  # TypeError: a value of the wrong type
         raise InputFileError(f"{path}: {exc}") from None
     return dict(values)
 

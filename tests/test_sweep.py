@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from app.cli import build_parser, main
-from app.cli_common import params_from_args
-from app.params_file import load_params_file
+from app.cli_common import map_changes_from_args
+from app.params_file import load_params_changes
 from app.sweep import (
     RESULT_COLUMNS,
     BagEvents,
@@ -442,13 +442,17 @@ def test_cogmap_sweep_end_to_end(tiny_bag: Path, tmp_path: Path, capsys):
     # --params best.json: the smallest complete map; other entries by name
     best = json.loads((out / "best.json").read_text())
     parsed = build_parser().parse_args(["serve", "--params", str(out / "best.json")])
-    assert params_from_args(parsed) == MapParams(**best["smallest_complete"]["params"])
+    assert MapParams().with_changes(**map_changes_from_args(parsed)) == MapParams(
+        **best["smallest_complete"]["params"]
+    )
     parsed = build_parser().parse_args(
         ["serve", "--params", f"{out / 'best.json'}#front_ate/0", "--t-total", "50"]
     )
     expected = MapParams(**best["front_ate"][0]["params"]).with_changes(t_total=50.0)
-    assert params_from_args(parsed) == expected
-    assert load_params_file(f"{out / 'best.json'}#paper") == MapParams()
+    assert MapParams().with_changes(**map_changes_from_args(parsed)) == expected
+    assert (
+        MapParams().with_changes(**load_params_changes(f"{out / 'best.json'}#paper")) == MapParams()
+    )
 
     # a different sweep into the same folder is refused
     assert main(["sweep", str(tiny_bag), "--out", str(out), "--delta", "2,9"]) == 2
@@ -461,11 +465,13 @@ def test_cogmap_sweep_end_to_end(tiny_bag: Path, tmp_path: Path, capsys):
 def test_params_files(tmp_path: Path, capsys):
     flat = tmp_path / "flat.json"
     flat.write_text('{"delta": 5.5, "integration_radius": 0.2}')
-    assert load_params_file(str(flat)) == MapParams(delta=5.5, integration_radius=0.2)
+    assert MapParams().with_changes(**load_params_changes(str(flat))) == MapParams(
+        delta=5.5, integration_radius=0.2
+    )
     bad = tmp_path / "bad.json"
     bad.write_text('{"gamma": 1}')
     with pytest.raises(InputFileError, match=r"bad.json: unknown map parameter\(s\) \['gamma'\]"):
-        load_params_file(str(bad))
+        load_params_changes(str(bad))
     out_of_range = tmp_path / "range.json"
     out_of_range.write_text('{"delta": 0.5}')
     assert main(["serve", "--params", str(out_of_range)]) == 2
@@ -473,9 +479,9 @@ def test_params_files(tmp_path: Path, capsys):
     best = tmp_path / "best.json"
     best.write_text(json.dumps({"format": "cogmap-sweep-best", "smallest_complete": None}))
     with pytest.raises(InputFileError, match="the sweep has no smallest_complete setting"):
-        load_params_file(str(best))
+        load_params_changes(str(best))
     with pytest.raises(InputFileError, match=r"front_ate has 0 settings"):
-        load_params_file(f"{best}#front_ate/0")
+        load_params_changes(f"{best}#front_ate/0")
     assert main(["run", "--out", str(tmp_path / "r"), "--params", str(tmp_path / "no.json")]) == 2
     assert _error_line(capsys) == (
         f"cogmap run: error: {tmp_path / 'no.json'}: no such parameter file; give a JSON file, "
