@@ -215,7 +215,6 @@ class CogmapApp:
         self._typed: dict[str, tuple[str, str]] = {}  # box -> (normal text, message)
         self._default_modes: tuple[MapMode, ...] = (MapMode.COMPACT,)
         self.views: dict[int, ClientView] = {}
-        self.exports: list[Path] = []
         self._frontend = frontend
         self._topics = topics
         self._image_scale = image_scale
@@ -1188,7 +1187,6 @@ class CogmapApp:
                     f"replay not saved: {type(exc).__name__}: {exc}", True
                 )
                 return
-            self.exports.append(saved)
             self.export_md.content = self._export_message(f"saved the HTML replay to {saved}")
 
         thread = threading.Thread(target=work, name="cogmap-html-replay", daemon=True)

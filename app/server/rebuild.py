@@ -222,7 +222,6 @@ class MapCache:
         self.size = size
         self.uses = uses or {}
         self._maps: OrderedDict[CacheKey, CognitiveMap] = OrderedDict()
-        self.hits = 0
 
     def key(
         self, mode: MapMode, params: MapParams, frames: int, finish: bool, log: int
@@ -242,10 +241,7 @@ class MapCache:
 
     def take(self, key: CacheKey) -> CognitiveMap | None:
         """Remove and return the map stored under ``key`` (None when there is none)."""
-        cmap = self._maps.pop(key, None)
-        if cmap is not None:
-            self.hits += 1
-        return cmap
+        return self._maps.pop(key, None)
 
     def clear(self) -> None:
         """Forget every map."""
@@ -578,7 +574,6 @@ __all__ = [
     "BuildTask",
     "Built",
     "MapCache",
-    "MapEvent",
     "ProcessBuilder",
     "ThreadBuilder",
     "build_map",

@@ -160,9 +160,6 @@ class RebuildRecord:
         return None if at is None else at - self.requested
 
 
-#: A newer request arrived during a rebuild.
-
-
 class Replay:
     """Replays one bag or log through a :class:`SlamSession` on a worker thread.
 

@@ -197,8 +197,6 @@ class GuiGate:
         others = sorted(str(k) for k in updates if k != "value")
         if others:
             self._refuse(handle, label, f"property {', '.join(others)} is not the client's", note)
-            if "value" not in updates:
-                return None
         if "value" not in updates:
             return None
         sent = updates["value"]
