@@ -22,7 +22,6 @@ Usage: ``python benchmarks/sweep.py [--delta 2:8:20] [--t-interval 0.5:5:10] [--
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import tempfile
 import time
@@ -156,7 +155,7 @@ def main() -> None:
         f"{len(cells) - len(mismatched)}/{len(cells)}; failed cells: {len(failed)}"
     )
 
-    best = json.loads((out / "best.json").read_text())
+    best = result.best  # what best.json holds
     swept = best["swept"]
     paper = best["paper"]
     print(f"\nPareto front on the default dataset ({out / 'pareto.png'}):")
