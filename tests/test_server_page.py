@@ -441,7 +441,7 @@ def test_cluster_log_is_an_html_table(short_bag: Path, reference: SlamSession) -
 def test_open_another_bag_from_the_page(
     short_bag: Path, reference: SlamSession, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    other = tmp_path / "copy.bag"
+    other = tmp_path / "copy.recording"  # a ROS 1 bag is one whatever its name (as for serve)
     shutil.copy(short_bag, other)
     shutil.copy(short_bag.with_suffix(".frontend.json"), other.with_suffix(".frontend.json"))
     (tmp_path / "notes.txt").write_text("not a bag")
@@ -450,10 +450,10 @@ def test_open_another_bag_from_the_page(
         wait(app)
         first = app.replay
         for typed, said in (
-            ("", "type the path of a .bag file on the server"),
-            (str(tmp_path / "nope.bag"), "nope.bag does not exist"),
-            (str(tmp_path), "is a folder, not a .bag file"),
-            (str(tmp_path / "notes.txt"), "is not a .bag file"),
+            ("", "type the path of a bag on the server (a ROS 1 .bag or a ROS 2 bag folder)"),
+            (str(tmp_path / "nope.bag"), f"not opened: bag {tmp_path / 'nope.bag'} does not exist"),
+            (str(tmp_path), f"not opened: {tmp_path} is a folder but not a ROS2 bag"),
+            (str(tmp_path / "notes.txt"), f"not opened: {tmp_path / 'notes.txt'} is not a ROS bag"),
             (
                 str(tmp_path / "broken.bag"),
                 f"not opened: {tmp_path / 'broken.bag'} has a damaged bag header; it is corrupt",
@@ -483,7 +483,7 @@ def test_open_another_bag_from_the_page(
         assert opened_by_replays == []  # the page's check opened it; the replay used that reader
         for mode in MapMode:
             assert_same_map(app.replay.session.maps[mode], reference.maps[mode])
-        assert "copy.bag" in app.status_html.content
+        assert "copy.recording" in app.status_html.content
 
 
 def test_html_replay_is_titled_captioned_quiet_and_normally_readable(

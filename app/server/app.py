@@ -20,7 +20,6 @@ from __future__ import annotations
 import html
 import logging
 import math
-import os
 import re
 import threading
 import time
@@ -389,7 +388,9 @@ class CogmapApp:
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
         with gui.add_folder("Open another bag — shared", expand_by_default=False):
-            self.bag_box = gui.add_text("bag path", "", hint="a .bag file on the server")
+            self.bag_box = gui.add_text(
+                "bag path", "", hint="a ROS 1 .bag or ROS 2 bag folder on the server"
+            )
             self.open_button = gui.add_button("open", icon=viser.Icon.FOLDER_OPEN)
             self.open_md = gui.add_html(
                 '<div class="cogmap-note" id="cogmap-open">A path on the server; the replay '
@@ -1202,29 +1203,26 @@ class CogmapApp:
         """Replay the bag at path ``typed`` (on the server) instead; errors go to the page."""
         raw = typed.strip()
         if not raw:
-            self._open_message("type the path of a .bag file on the server", error=True)
+            self._open_message(
+                "type the path of a bag on the server (a ROS 1 .bag or a ROS 2 bag folder)",
+                error=True,
+            )
             return False
         path = Path(raw).expanduser()
         problem = None
-        if not path.exists():
-            problem = f"{path} does not exist"
-        elif path.is_dir():
-            problem = f"{path} is a folder, not a .bag file"
-        elif path.suffix.lower() != ".bag":
-            problem = f"{path} is not a .bag file (ROS 1 bag)"
-        elif not os.access(path, os.R_OK):
-            problem = f"{path} is not readable"
         reader = None
-        if problem is None:
-            try:  # opened once here, to refuse it before the running replay stops; then handed over
-                reader = open_bag(path, topics=self._topics, image_scale=self._image_scale)
-                frames = reader.info.frame_count
-                if frames == 0:
-                    problem = f"{path} has no camera frames on the image topic"
-            except CogmapError as exc:
-                problem = str(exc)
-            except Exception as exc:
-                problem = f"cannot open {path}: {type(exc).__name__}: {exc}"
+        # opened once here, to refuse it before the running replay stops (the reader names what
+        # is wrong: no such path, neither a ROS 1 bag nor a ROS 2 bag folder, ...), then handed
+        # over to the new replay
+        try:
+            reader = open_bag(path, topics=self._topics, image_scale=self._image_scale)
+            frames = reader.info.frame_count
+            if frames == 0:
+                problem = f"{path} has no camera frames on the image topic"
+        except CogmapError as exc:
+            problem = str(exc)
+        except Exception as exc:
+            problem = f"cannot open {path}: {type(exc).__name__}: {exc}"
         if problem is not None:
             if reader is not None:
                 reader.close()
