@@ -329,6 +329,10 @@ def test_seek_forward_runs_the_front_end_up_to_the_target(
         for mode in MapMode:
             assert_same_map(app.replay.session.maps[mode], expected[mode])
         assert app.replay.state is PlaybackState.PAUSED
+        # the dead-reckoned path shown is the log's, up to the frame reached
+        with app.replay.lock:
+            shown = app._dead_reckoning()
+        np.testing.assert_array_equal(shown, reference.log.dead_reckoning()[: app.replay.cursor])
 
 
 def test_exports(short_bag: Path, reference: SlamSession, tmp_path: Path) -> None:

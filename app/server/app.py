@@ -895,12 +895,11 @@ class CogmapApp:
 
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log
-        frames = min(self.replay.cursor, log_.frames)
-        key = (id(log_), frames)
-        if key != self._odometry_key:
+        key = (id(log_), log_.frames)  # the whole log's path, cut at the cursor on every call:
+        if key != self._odometry_key:  # a replay behind its log (after a seek) reuses it
             self._odometry_key = key
-            self._odometry = log_.dead_reckoning()[:frames]
-        return self._odometry
+            self._odometry = log_.dead_reckoning()
+        return self._odometry[: min(self.replay.cursor, log_.frames)]
 
     def _publish_scene(self) -> None:
         session = self.replay.session
