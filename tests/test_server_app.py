@@ -628,36 +628,47 @@ def test_bad_gui_values_are_refused_before_any_client_sees_them(
                 assert sent == ["standard.g2o"]  # the map this viewer shows
 
 
+def _shared_handles(app: CogmapApp) -> dict[str, object]:
+    """The shared controls a rogue client tries to change, by key."""
+    return {
+        "alpha": app.param_sliders["alpha"],
+        "delta": app.param_sliders["delta"],
+        "seek": app.seek_slider,
+        "speed": app.speed_dropdown,
+        "box": app.param_boxes["delta"],
+    }
+
+
 def _shared_values(app: CogmapApp) -> dict[str, object]:
     """The values of the shared controls a rogue client tries to change."""
-    return {
-        "alpha": app.param_sliders["alpha"].value,
-        "delta": app.param_sliders["delta"].value,
-        "seek": app.seek_slider.value,
-        "speed": app.speed_dropdown.value,
-        "box": app.param_boxes["delta"].value,
-    }
+    return {key: h.value for key, h in _shared_handles(app).items()}  # type: ignore[attr-defined]
+
+
+#: The values of :func:`_shared_handles` in force at the start, paused at t = 0.
+IN_FORCE = {"alpha": 10.0, "delta": 3.746, "seek": 0.0, "speed": "max", "box": "3.746"}
 
 
 def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Path) -> None:
     with running_app(short_bag, autoplay=False) as app:
         wait(app)
+        handles = _shared_handles(app)
         before = _shared_values(app)
+        assert before == IN_FORCE
         refused = app.gate.refused
         with client(app.server.get_port(), hello=False) as ws:  # never says hello
-            send(ws, app.param_sliders["alpha"], value=1e308)
-            send(ws, app.param_sliders["delta"], value=1.0)
-            send(ws, app.seek_slider, value=float("inf"))
-            send(ws, app.speed_dropdown, value="bogus")
-            send(ws, app.param_boxes["delta"], value="5")  # valid, but not yet a client
+            send(ws, handles["alpha"], value=1e308)
+            send(ws, handles["delta"], value=1.0)
+            send(ws, handles["seek"], value=float("inf"))
+            send(ws, handles["speed"], value="bogus")
+            send(ws, handles["box"], value="5")  # valid, but not yet a client
             until(lambda: app.gate.refused >= refused + 5)
         assert app.gate.refused == refused + 5
         assert _shared_values(app) == before
         assert app.replay.params == MapParams()
-        # what a client joining later receives: the values in force
-        assert _buffered(app, app.param_sliders["alpha"]) in (None, before["alpha"])
-        assert _buffered(app, app.param_sliders["delta"]) in (None, before["delta"])
-        assert _buffered(app, app.speed_dropdown) in (None, before["speed"])
+        # what a client joining later receives: the values in force, sent back after each
+        # refusal (the last one, the box's, just after it was counted)
+        until(lambda: _buffered(app, handles["box"]) is not None, what="the box sent back")
+        assert {key: _buffered(app, h) for key, h in handles.items()} == IN_FORCE
         with client(app.server.get_port()) as late:
             values = [u["value"] for _, u in _drain(late, 1.0) if "value" in u]
         assert not {1e308, 1.0, float("inf"), "bogus"} & set(values)
