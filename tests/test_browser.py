@@ -166,6 +166,21 @@ def click_on(page: Any, view: Any, canvas: Any, world: np.ndarray) -> tuple[floa
     return float(x), float(y)
 
 
+def camera_settled(view: Any) -> bool:
+    """Whether the camera frames what the view shows, still, in the browser.
+
+    The view has framed what it shows now, the browser has reported the pose it set, and the
+    camera's position is the same in two reads 100 ms apart.
+    """
+    first = tuple(view.client.camera.position)
+    time.sleep(0.1)
+    return (
+        view._framed == view.content_extent()
+        and view._camera_acknowledged
+        and tuple(view.client.camera.position) == first
+    )
+
+
 def close_notices(page: Any) -> None:
     """Close viser's "software WebGL" notice, which would cover part of the map."""
     for button in page.locator(".mantine-Notification-closeButton").all():
@@ -269,7 +284,7 @@ def test_the_page_in_chromium(
             choose(page, "map", "compact")
             choose(page, "compare with", "standard")
             until(lambda: view.state.shown == (MapMode.COMPACT, MapMode.STANDARD), WAIT_S)
-            time.sleep(1.0)  # the camera frames the two maps
+            until(lambda: camera_settled(view), WAIT_S, "the camera framing the two maps")
             snap = app.replay.session.maps[MapMode.COMPACT].snapshot()
             k = snap.vertex_ids.shape[0] // 3
             target = np.array([snap.poses[k, 0], snap.poses[k, 1], 0.0])
