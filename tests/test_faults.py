@@ -26,8 +26,8 @@ from tests.test_dataset_reader import simple_bag
 from tests.test_g2o import small_graph
 
 ROOT = Path(__file__).resolve().parents[1]
-REPORT = {
-    MARKER,
+#: A report's files in the order the marker lists them (the marker itself is written last).
+REPORT_ORDER = (
     "config.json",
     "summary.json",
     "sizes.csv",
@@ -38,7 +38,8 @@ REPORT = {
     "groundtruth_tum.txt",
     "size.png",
     "map.png",
-}
+)
+REPORT = {MARKER, *REPORT_ORDER}
 
 
 @pytest.fixture(scope="module")
@@ -96,6 +97,7 @@ def test_force_replaces_only_the_report_files(bag: Path, tmp_path: Path, capsys)
     assert set(after) == set(before) | REPORT
     marker = json.loads((out / MARKER).read_text())
     assert set(marker["files"]) == REPORT - {MARKER}
+    assert marker["files"] == list(REPORT_ORDER)
 
 
 def test_force_into_the_working_directory_keeps_everything_else(
@@ -125,15 +127,7 @@ def test_force_over_an_old_report_drops_only_its_stale_files(bag: Path, tmp_path
     assert after["summary.json"] != old["summary.json"]
     assert set(after) == REPORT - {"groundtruth_tum.txt"} | {"notes.txt"}
     assert json.loads(after[MARKER])["files"] == [  # type: ignore[arg-type]
-        "config.json",
-        "summary.json",
-        "sizes.csv",
-        "standard.g2o",
-        "scene_integration.g2o",
-        "compact.g2o",
-        "trajectory_tum.txt",
-        "size.png",
-        "map.png",
+        name for name in REPORT_ORDER if name != "groundtruth_tum.txt"
     ]
 
 
@@ -533,6 +527,7 @@ def test_ctrl_c_while_moving_the_report_into_place_is_held_back(
     after = snapshot(out)
     assert set(after) == REPORT and len(moved) == len(REPORT)  # every file, marker last
     assert moved[-1] == MARKER
+    assert moved == [*REPORT_ORDER, MARKER]
     assert json.loads(after["summary.json"])["params"]["delta"] == 6.0  # type: ignore[arg-type]
     assert after["summary.json"] != old["summary.json"]
     assert [p.name for p in tmp_path.iterdir()] == ["out"]
