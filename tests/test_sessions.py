@@ -36,6 +36,7 @@ from cogmap_core.session_file import (
     save_session,
 )
 from cogmap_core.slam import EventLog, SlamSession
+from tests.test_event_log import rewrite_npz
 from tests.test_server_support import assert_same_map, counter, running_app
 
 # 2 x 2 laps of the figure eight at 8 frames per second: about 2000 frames in all
@@ -297,13 +298,10 @@ def test_another_format_version_is_refused(
     resumed: Path, days: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     _, day2 = days
-    with np.load(resumed / "day1.session.npz") as data:
-        arrays = {name: data[name] for name in data.files}
-    header = json.loads(str(arrays["header"]))
-    header["version"] = 99
-    arrays["header"] = np.array(json.dumps(header))
-    other = tmp_path / "v99.npz"
-    np.savez(other, **arrays)
+    session = resumed / "day1.session.npz"
+    with np.load(session) as data:
+        header = json.loads(str(data["header"]))
+    other = rewrite_npz(session, tmp_path / "v99.npz", header=json.dumps({**header, "version": 99}))
     out = tmp_path / "r"
     assert _run_resume(day2, other, out) == 2
     err = capsys.readouterr().err.strip()
