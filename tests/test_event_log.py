@@ -64,9 +64,9 @@ def test_ground_truth_per_frame_and_per_link() -> None:
 
 def test_views_are_read_only() -> None:
     log = build()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="^assignment destination is read-only$"):
         log.frame_time[0] = 1.0
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="^assignment destination is read-only$"):
         log.columns()["time"][0] = 1.0
 
 
