@@ -149,6 +149,14 @@ def damaged(data: bytes, how: str) -> bytes:
     return data[:mid] + bytes(8) + data[mid + 8 :]  # 8 bytes overwritten
 
 
+def frames_with_corrupt_jpegs(n: int) -> list[tuple[float, bytes]]:
+    """``n`` frames at :func:`frame_times`; every 12th from the 6th (t = 1.1 s, ...) a cut JPEG."""
+    return [
+        (t, damaged(jpeg(k), "cut") if k % 12 == 5 else jpeg(k))
+        for k, t in enumerate(frame_times(n))
+    ]
+
+
 @pytest.mark.parametrize(
     ("how", "warning"),
     [
@@ -172,10 +180,7 @@ def test_jpeg_decoder_catches_libjpeg_warnings(how: str, warning: str) -> None:
 
 def test_corrupt_but_decodable_jpegs_are_skipped_and_counted(tmp_path: Path) -> None:
     n = 36
-    frames = [
-        (t, damaged(jpeg(k), "cut") if k % 12 == 5 else jpeg(k))
-        for k, t in enumerate(frame_times(n))
-    ]
+    frames = frames_with_corrupt_jpegs(n)
     odom = [(0.1 * k, 1.0, 0.0) for k in range(2 * n + 1)]
     with open_bag(write_bag(tmp_path / "cj.bag", frames, odom), image_scale=4) as reader:
         got = list(reader.frames())
@@ -192,10 +197,7 @@ def test_corrupt_but_decodable_jpegs_are_skipped_and_counted(tmp_path: Path) -> 
 
 def test_cogmap_run_skips_corrupt_jpegs_and_refuses_tiny_images(tmp_path: Path, capsys) -> None:
     n = 36
-    frames = [
-        (t, damaged(jpeg(k), "cut") if k % 12 == 5 else jpeg(k))
-        for k, t in enumerate(frame_times(n))
-    ]
+    frames = frames_with_corrupt_jpegs(n)
     odom = [(0.1 * k, 0.1, 0.0) for k in range(2 * n + 1)]
     path = write_bag(tmp_path / "cj.bag", frames, odom)
     assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 0

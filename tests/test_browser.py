@@ -33,6 +33,7 @@ from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
+from tests.test_server_support import until, wait
 
 short_bag = support.short_bag  # session fixtures
 reference = support.reference
@@ -128,14 +129,8 @@ def wait_in_page(page: Any, mode: str, expected: tuple[str, ...], message: str) 
     )
 
 
-def wait_for(condition: Any, timeout: float = 30.0, what: str = "") -> float:
-    """Poll ``condition()`` until true; return the seconds it took."""
-    started = time.perf_counter()
-    while not condition():
-        if time.perf_counter() - started > timeout:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.005)
-    return time.perf_counter() - started
+#: How long the browser may take for anything but the HTML replay (software WebGL is slow).
+WAIT_S = 30.0
 
 
 def click_on(page: Any, view: Any, canvas: Any, world: np.ndarray) -> tuple[float, float]:
@@ -158,7 +153,7 @@ def click_on(page: Any, view: Any, canvas: Any, world: np.ndarray) -> tuple[floa
     for fx, fy in pixels:
         before = len(hits)
         page.mouse.click(box["x"] + fx * box["width"], box["y"] + fy * box["height"])
-        wait_for(lambda b=before: len(hits) > b, what="a click's ray")
+        until(lambda b=before: len(hits) > b, WAIT_S, "a click's ray")
     screen = np.array([[fx * box["width"], fy * box["height"], 1.0] for fx, fy in pixels])
     ground = np.array([h[:2] for h in hits])
     to_ground = np.linalg.solve(screen, ground)  # (3, 2): [px, py, 1] -> (x, y)
@@ -166,9 +161,24 @@ def click_on(page: Any, view: Any, canvas: Any, world: np.ndarray) -> tuple[floa
     view.select(None)  # forget what the calibration clicks selected
     before = len(hits)
     page.mouse.click(box["x"] + x, box["y"] + y)
-    wait_for(lambda: len(hits) > before, what="the click's ray")
+    until(lambda: len(hits) > before, WAIT_S, "the click's ray")
     assert np.hypot(*(hits[-1][:2] - world[:2])) < 0.01, (hits, world)
     return float(x), float(y)
+
+
+def camera_settled(view: Any) -> bool:
+    """Whether the camera frames what the view shows, still, in the browser.
+
+    The view has framed what it shows now, the browser has reported the pose it set, and the
+    camera's position is the same in two reads 100 ms apart.
+    """
+    first = tuple(view.client.camera.position)
+    time.sleep(0.1)
+    return (
+        view._framed == view.content_extent()
+        and view._camera_acknowledged
+        and tuple(view.client.camera.position) == first
+    )
 
 
 def close_notices(page: Any) -> None:
@@ -191,14 +201,14 @@ def test_the_page_in_chromium(
     latencies: dict[str, float] = {}
     frames = reference.log.frames
     with support.running_app(short_bag, autoplay=False) as app, sync_playwright() as p:
-        assert app.wait_idle(60)
+        wait(app)
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         try:
             page = browser.new_page(viewport={"width": 1400, "height": 950})
             page.goto(f"http://127.0.0.1:{app.server.get_port()}", timeout=TIMEOUT_MS)
             status = page.locator("#cogmap-status")
             status.wait_for(timeout=TIMEOUT_MS)
-            wait_for(lambda: len(app.views) == 1, what="the tab's view")
+            until(lambda: len(app.views) == 1, WAIT_S, "the tab's view")
             assert page.title() == "cogmap · compact cognitive map"
             close_notices(page)
 
@@ -245,40 +255,42 @@ def test_the_page_in_chromium(
                 box.click()
                 box.fill(garbage)
                 box.press("Enter")
-                wait_for(lambda: "refused" in message.inner_text(), what=f"{name} refused")
+                until(lambda: "refused" in message.inner_text(), WAIT_S, f"{name} refused")
                 assert box.input_value() == format_value(getattr(params, name))
                 assert app.replay.params == params
                 page.get_by_role("button", name="reset to paper values").click()
-                wait_for(lambda: counters(page, "compact") == paper, what="paper values")
+                until(lambda: counters(page, "compact") == paper, WAIT_S, "paper values")
 
             # ---- switch maps, then two side by side
             view = next(iter(app.views.values()))
             canvas = page.locator("canvas").first
             choose(page, "map", "standard")
-            wait_for(lambda: view.state.shown == (MapMode.STANDARD,), what="standard")
-            wait_for(
+            until(lambda: view.state.shown == (MapMode.STANDARD,), WAIT_S, "standard")
+            until(
                 lambda: colour_pixels(canvas.screenshot(), MAP_COLORS[MapMode.STANDARD]) > 100,
-                what="the standard map drawn",
+                WAIT_S,
+                "the standard map drawn",
             )
             control(page, "side by side").click()
             choose(page, "compare with", "compact")
-            wait_for(lambda: len(view.state.shown) == 2, what="side by side")
-            wait_for(
+            until(lambda: len(view.state.shown) == 2, WAIT_S, "side by side")
+            until(
                 lambda: colour_pixels(canvas.screenshot(), MAP_COLORS[MapMode.COMPACT]) > 50,
-                what="the compact map beside",
+                WAIT_S,
+                "the compact map beside",
             )
 
             # ---- click a vertex of the compact map (drawn beside the standard one)
             choose(page, "map", "compact")
             choose(page, "compare with", "standard")
-            wait_for(lambda: view.state.shown == (MapMode.COMPACT, MapMode.STANDARD))
-            time.sleep(1.0)  # the camera frames the two maps
+            until(lambda: view.state.shown == (MapMode.COMPACT, MapMode.STANDARD), WAIT_S)
+            until(lambda: camera_settled(view), WAIT_S, "the camera framing the two maps")
             snap = app.replay.session.maps[MapMode.COMPACT].snapshot()
             k = snap.vertex_ids.shape[0] // 3
             target = np.array([snap.poses[k, 0], snap.poses[k, 1], 0.0])
             x, y = click_on(page, view, canvas, target)
             inspect = page.locator("#cogmap-inspect")
-            wait_for(lambda: inspect.get_attribute("data-kind") == "vertex", what="a pick")
+            until(lambda: inspect.get_attribute("data-kind") == "vertex", WAIT_S, "a pick")
             assert f"vertex id {snap.vertex_ids[k]}" in " ".join(inspect.inner_text().split())
 
             # ---- pin the compact map, change delta, compare
@@ -288,14 +300,15 @@ def test_the_page_in_chromium(
             delta.fill("8")
             delta.press("Enter")
             changed = expected_counters(reference, MapParams(delta=8.0), MapMode.COMPACT)
-            wait_for(lambda: counters(page, "compact") == changed, what="delta = 8")
+            until(lambda: counters(page, "compact") == changed, WAIT_S, "delta = 8")
             live = page.locator("#cogmap-compare-live-vertices")
-            wait_for(lambda: live.inner_text() == changed[0], what="the comparison")
+            until(lambda: live.inner_text() == changed[0], WAIT_S, "the comparison")
             pinned = page.locator("#cogmap-compare-pinned-vertices").inner_text()
             assert pinned == str(compact.num_vertices) != changed[0]
-            wait_for(
+            until(
                 lambda: colour_pixels(canvas.screenshot(), PINNED_COLOR, 45) > 20,
-                what="the pinned map drawn",
+                WAIT_S,
+                "the pinned map drawn",
             )
             page.screenshot(path=str(ARTIFACTS / "browser-compare.png"))
             shots.append(ARTIFACTS / "browser-compare.png")
@@ -304,7 +317,7 @@ def test_the_page_in_chromium(
             second = browser.new_page(viewport={"width": 1200, "height": 900})
             second.goto(f"http://127.0.0.1:{app.server.get_port()}", timeout=TIMEOUT_MS)
             second.locator("#cogmap-status").wait_for(timeout=TIMEOUT_MS)
-            wait_for(lambda: len(app.views) == 2, what="the second tab's view")
+            until(lambda: len(app.views) == 2, WAIT_S, "the second tab's view")
             close_notices(second)
             other = next(v for v in app.views.values() if v is not view)
             assert other.state.shown == (MapMode.COMPACT,) and other.pinned is None
@@ -313,7 +326,7 @@ def test_the_page_in_chromium(
             assert control(page, "side by side").is_checked()  # the first tab kept its view
             assert control(second, "δ =").input_value() == "8"  # parameters are shared
             choose(second, "speed", "1x")  # shared: the first tab shows it too
-            wait_for(lambda: control(page, "speed").input_value() == "1x", what="shared speed")
+            until(lambda: control(page, "speed").input_value() == "1x", WAIT_S, "shared speed")
             second.mouse.click(40, 40)  # focus the page (not a box or a button)
             second.keyboard.press("Space")  # at the end: plays again from the start
             second.wait_for_selector('#cogmap-status[data-state="playing"]', timeout=TIMEOUT_MS)
@@ -334,10 +347,10 @@ def test_the_page_in_chromium(
             replay_box.click()
             replay_box.fill(str(out))
             replay_box.press("Enter")
-            wait_for(lambda: app.replay_path.value == str(out), what="the replay path")
+            until(lambda: app.replay_path.value == str(out), WAIT_S, "the replay path")
             page.get_by_role("button", name="save HTML replay").click()
             export = page.locator("#cogmap-export")
-            wait_for(lambda: "saved the HTML replay" in export.inner_text(), 120, "the replay")
+            until(lambda: "saved the HTML replay" in export.inner_text(), 120, "the replay")
             umask = os.umask(0)
             os.umask(umask)
             assert out.stat().st_mode & 0o777 == 0o666 & ~umask

@@ -64,9 +64,9 @@ def test_ground_truth_per_frame_and_per_link() -> None:
 
 def test_views_are_read_only() -> None:
     log = build()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="^assignment destination is read-only$"):
         log.frame_time[0] = 1.0
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="^assignment destination is read-only$"):
         log.columns()["time"][0] = 1.0
 
 
@@ -146,8 +146,8 @@ def test_links_beyond_the_first_capacity_have_no_score_without_a_score_column() 
 
 
 # ------------------------------------------------------------------------------ event files
-def _rewrite(path: Path, target: Path, **changes: object) -> Path:
-    """A copy of the event file ``path`` with header fields or arrays changed."""
+def rewrite_npz(path: Path, target: Path, **changes: object) -> Path:
+    """A copy of the ``.npz`` file ``path`` (an event or session file) with arrays replaced."""
     with np.load(path) as data:
         arrays = {name: data[name] for name in data.files}
     for name, value in changes.items():
@@ -187,11 +187,11 @@ def test_a_damaged_event_file_is_one_line_naming_the_problem(
     elif damage == "truncated":
         bad.write_bytes(event_file.read_bytes()[:100])
     elif damage == "header [1]":
-        _rewrite(event_file, bad, header="[1]")
+        rewrite_npz(event_file, bad, header="[1]")
     elif damage == "header not JSON":
-        _rewrite(event_file, bad, header="{not json")
+        rewrite_npz(event_file, bad, header="{not json")
     elif damage == "version 99":
-        _rewrite(event_file, bad, header=json.dumps({**header, "version": 99}))
+        rewrite_npz(event_file, bad, header=json.dumps({**header, "version": 99}))
     else:
         with np.load(event_file) as data:
             np.savez(bad, **{n: data[n] for n in data.files if n != "frame_end"})

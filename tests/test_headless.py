@@ -17,6 +17,7 @@ from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.evaluation import absolute_trajectory_error
 from cogmap_core.g2o import read_g2o
 from cogmap_core.slam import SlamSession
+from tests.test_faults import one_line_error
 
 SUMMARY_KEYS = {
     "dataset",
@@ -178,31 +179,45 @@ def test_sizes_csv_and_figures(report: Path, reference):
     assert config["map"]["delta"] == 3.746
 
 
+#: Parameters ``cogmap run`` refuses, and what its one line of error says.
+BAD_PARAMETERS: list[tuple[list[str], list[str]]] = [
+    (["--delta", "1.0"], ["delta=1.0 is out of range", "(1, "]),
+    (["--alpha", "-2"], ["alpha=-2.0 is out of range"]),
+    (["--t-total", "0"], ["t_total=0.0 is out of range"]),
+    (["--param", "gamma=1"], ["unknown map parameter(s) ['gamma']"]),
+    (["--param", "huber_scale"], ["expected NAME=VALUE"]),
+    (["--param", "gate_heading=x"], ["gate_heading='x': the value is not a number"]),
+    (["--param", "gate_position=-1"], ["gate_position=-1.0 is out of range"]),
+]
+
+
+@pytest.mark.parametrize(
+    ("args", "said"), BAD_PARAMETERS, ids=[" ".join(args) for args, _ in BAD_PARAMETERS]
+)
+def test_bad_parameters_are_one_line_and_exit_2(
+    tmp_path: Path, maze_bag: Path, capsys, args: list[str], said: list[str]
+) -> None:
+    out = tmp_path / "out"
+    assert main(["run", str(maze_bag), "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    line = one_line_error(err)
+    assert err.strip().splitlines() == [line]
+    for part in said:
+        assert part in line
+    assert not out.exists()  # nothing written by a failed run
+
+
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, maze_bag: Path, capsys):
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "missing.bag"), "--out", str(out)]) == 2
-    assert "no such file" in capsys.readouterr().err
-    assert main(["run", str(maze_bag), "--out", str(out), "--delta", "1.0"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "delta=1.0 is out of range" in err[0] and "(1, " in err[0]
-    assert main(["run", str(maze_bag), "--out", str(out), "--alpha", "-2"]) == 2
-    assert "alpha=-2.0 is out of range" in capsys.readouterr().err
-    assert main(["run", str(maze_bag), "--out", str(out), "--t-total", "0"]) == 2
-    assert "t_total=0.0 is out of range" in capsys.readouterr().err
-    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gamma=1"]) == 2
-    assert "unknown map parameter(s) ['gamma']" in capsys.readouterr().err
-    assert main(["run", str(maze_bag), "--out", str(out), "--param", "huber_scale"]) == 2
-    assert "expected NAME=VALUE" in capsys.readouterr().err
-    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gate_heading=x"]) == 2
-    assert "gate_heading='x': the value is not a number" in capsys.readouterr().err
-    assert main(["run", str(maze_bag), "--out", str(out), "--param", "gate_position=-1"]) == 2
-    assert "gate_position=-1.0 is out of range" in capsys.readouterr().err
+    assert "no such file" in one_line_error(capsys.readouterr().err)
     truncated = tmp_path / "truncated.bag"
     truncated.write_bytes(maze_bag.read_bytes()[:200_000])
     assert main(["run", str(truncated), "--out", str(out)]) == 2
-    assert "truncated" in capsys.readouterr().err
+    assert "truncated" in one_line_error(capsys.readouterr().err)
     assert main(["run", str(maze_bag), "--out", str(out), "--image-topic", "/nope"]) == 2
-    assert "/irat_red/camera/image/compressed" in capsys.readouterr().err  # lists what is there
+    # lists what is there
+    assert "/irat_red/camera/image/compressed" in one_line_error(capsys.readouterr().err)
     assert not out.exists()  # nothing written by failed runs
 
 

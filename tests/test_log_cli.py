@@ -14,6 +14,7 @@ from cogmap_core.cognitive_map import MapMode
 from cogmap_core.slam import SlamSession
 from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
+from tests.test_faults import snapshot
 
 DT = 0.1
 SIDE_SAMPLES = 160  # 8 m at 0.5 m/s
@@ -138,9 +139,16 @@ def test_a_log_report_is_staged_like_a_bag_report(square_log: Path, tmp_path: Pa
     assert (out / ".cogmap-report").is_file()
     mine = out / "notes.txt"
     mine.write_text("keep me")
+    before = snapshot(out)
     assert main(["run", str(square_log), "--out", str(out)]) == 2  # not empty: needs --force
-    assert main(["run", str(square_log), "--out", str(out), "--force"]) == 0
+    assert snapshot(out) == before
+    # another delta, so that the rewritten summary.json must differ from the old one
+    assert main(["run", str(square_log), "--out", str(out), "--force", "--delta", "5"]) == 0
     assert mine.read_text() == "keep me" and (out / "summary.json").is_file()
+    after = snapshot(out)
+    assert set(after) == set(before)
+    assert after["summary.json"] != before["summary.json"]
+    assert json.loads(after["summary.json"])["params"]["delta"] == 5.0  # type: ignore[arg-type]
 
 
 def test_an_empty_ground_truth_file_is_a_warning(tmp_path: Path, capsys) -> None:

@@ -19,8 +19,7 @@ from pathlib import Path
 import msgspec
 import numpy as np
 import pytest
-import viser
-from websockets.sync.client import ClientConnection, connect
+from websockets.sync.client import ClientConnection
 
 from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
 from app.server.export import g2o_bytes, save_html_replay, summary_dict, summary_inputs
@@ -32,7 +31,16 @@ from cogmap_core.datasets.profile import profile_path
 from cogmap_core.g2o import read_g2o
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
-from tests.test_server_support import assert_same_map, counter, make_server, running_app
+from tests.test_server_support import (
+    assert_same_map,
+    client,
+    counter,
+    make_server,
+    running_app,
+    send,
+    until,
+    wait,
+)
 
 short_bag = support.short_bag  # session fixtures shared by the web-app tests
 reference = support.reference
@@ -60,10 +68,6 @@ def differs(a: object, b: object) -> bool:
     ):
         return True
     return not np.allclose(a.snapshot().poses, b.snapshot().poses, rtol=0, atol=1e-9)
-
-
-def wait(app: CogmapApp) -> None:
-    assert app.wait_idle(60), "the replay did not settle"
 
 
 def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSession) -> None:
@@ -190,39 +194,15 @@ def test_out_of_range_values_are_clamped_and_non_numbers_refused(short_bag: Path
         assert app.replay.params == MapParams().with_changes(**expected)
 
 
-def _client(port: int) -> ClientConnection:
-    return connect(
-        f"ws://127.0.0.1:{port}",
-        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
-        max_size=None,
-        open_timeout=10,
-    )
-
-
-def _say_hello(ws: ClientConnection) -> None:
-    """What a browser sends first (its camera); viser then treats it as a client."""
-    ws.send(support.camera_message())
-
-
 def test_a_client_sending_out_of_range_values_over_the_websocket(short_bag: Path) -> None:
     with running_app(short_bag, autoplay=False) as app:
         wait(app)
         delta = app.param_sliders["delta"]
-        with _client(app.server.get_port()) as ws:
-            _say_hello(ws)
-            deadline = time.monotonic() + 10
-            while not app.server.get_clients() and time.monotonic() < deadline:
-                time.sleep(0.01)
+        with client(app.server.get_port()) as ws:
+            until(lambda: app.server.get_clients())
             for sent, expected in ((1e9, 30.0), (-3.0, 1.05), (6.5, 6.5)):
-                message = {
-                    "type": "GuiUpdateMessage",
-                    "uuid": delta._impl.uuid,
-                    "updates": {"value": sent},
-                }
-                ws.send(msgspec.msgpack.encode(message))
-                deadline = time.monotonic() + 10
-                while app.replay.params.delta != expected and time.monotonic() < deadline:
-                    time.sleep(0.01)
+                send(ws, delta, value=sent)
+                until(lambda e=expected: app.replay.params.delta == e)
                 assert delta.value == expected
                 assert app.replay.params.delta == expected
         # A value slipped in without the callback (viser applies values of clients that never
@@ -442,9 +422,7 @@ def test_twenty_clients_at_once_and_abrupt_disconnects_do_not_disturb_playback(
 ) -> None:
     with running_app(short_bag, speed=30.0) as app:
         port = app.server.get_port()
-        clients = [_client(port) for _ in range(20)]
-        for ws in clients:
-            _say_hello(ws)
+        clients = [client(port) for _ in range(20)]
         received = [0] * len(clients)
         deadline = time.monotonic() + 1.0
         while time.monotonic() < deadline:
@@ -492,7 +470,7 @@ def test_a_late_client_receives_the_full_current_map(
             total = sum(points.values())
             shown = mode is MapMode.COMPACT  # hidden maps are sent when first shown
             assert total == (reference.maps[mode].num_vertices if shown else 0)
-        with _client(app.server.get_port()) as ws:
+        with client(app.server.get_port(), hello=False) as ws:
             size = 0
             try:
                 while True:
@@ -559,15 +537,8 @@ def _drain(ws: ClientConnection, seconds: float = 0.5) -> list[tuple[str, dict]]
     return seen
 
 
-def _send(ws: ClientConnection, handle: object, updates: dict) -> None:
-    uuid = handle._impl.uuid  # type: ignore[attr-defined]
-    ws.send(msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": uuid, "updates": updates}))
-
-
 def _wait_clients(app: CogmapApp, n: int) -> None:
-    deadline = time.monotonic() + 10
-    while len(app.server.get_clients()) < n and time.monotonic() < deadline:
-        time.sleep(0.01)
+    until(lambda: len(app.server.get_clients()) >= n)
     assert len(app.server.get_clients()) == n
 
 
@@ -591,110 +562,118 @@ def test_bad_gui_values_are_refused_before_any_client_sees_them(
     with running_app(short_bag, autoplay=False) as app:
         wait(app)
         port = app.server.get_port()
-        with _client(port) as sender, _client(port) as viewer:
-            _say_hello(sender)
+        with client(port) as sender:
             _wait_clients(app, 1)
             (sender_id,) = app.server.get_clients()
-            _say_hello(viewer)
-            _wait_clients(app, 2)
-            _drain(viewer)
-            mine = app.views[sender_id]
-            refused = app.gate.refused
-            shared = [
-                (app.speed_dropdown, {"value": "bogus"}),
-                (app.seek_slider, {"value": float("inf")}),
-                (app.param_sliders["alpha"], {"value": "many"}),
-                (app.param_boxes["delta"], {"value": 12}),
-                (app.replay_path, {"value": 12}),
-                (app.play_button, {"value": False}),
-                (app.play_button, {"disabled": True}),  # not a client's to change
-                (app.param_sliders["delta"], {"max": 1e9}),
-                (app.param_boxes["delta"], {"value": "abc"}),  # last: its message stays
-            ]
-            own = [
-                (mine.mode_dropdown, {"value": "bogus"}),
-                (mine.colouring_dropdown, {"value": "nope"}),
-                (mine.layer_checkboxes["truth"], {"value": "bogus"}),  # viser would make it True
-                (mine.pin_button, {"value": False}),
-            ]
-            for handle, updates in shared + own:
-                _send(sender, handle, updates)
-            deadline = time.monotonic() + 10
-            while (
-                app.gate.refused < refused + len(shared) or mine.gate.refused < len(own)
-            ) and time.monotonic() < deadline:
-                time.sleep(0.01)
-            assert app.gate.refused == refused + len(shared)
-            assert mine.gate.refused == len(own)
-            attacked = {h._impl.uuid for h, _ in shared}  # type: ignore[attr-defined]
-            seen = [(uuid, u) for uuid, u in _drain(viewer) if uuid in attacked]
-            # the viewer only ever sees the values in force, sent back after each refusal
-            values = {repr(u.get("value")) for _, u in seen}
-            assert values and not values & {"'bogus'", "inf", "'many'", "'abc'", "12"}
-            assert all(set(u) == {"value"} for _, u in seen)
-            assert app.speed_dropdown.value == "max" and app.param_boxes["delta"].value == "3.746"
-            assert mine.mode_dropdown.value == "compact" and mine.state.layers["truth"] is True
-            assert mine.colouring_dropdown.value == "loop closures by cluster"
-            assert app.param_sliders["delta"].max == 30.0
-            assert not app.play_button.disabled
-            assert app.replay.params == MapParams()
-            message = html.unescape(app.params_md.content)
-            assert "refused δ: 'abc' is not a number; δ stays 3.746" in message
-            # a valid value still works -- for the viewer who sent it only
-            _send(sender, mine.mode_dropdown, {"value": "standard"})
-            deadline = time.monotonic() + 10
-            while mine.state.shown != (MapMode.STANDARD,) and time.monotonic() < deadline:
-                time.sleep(0.01)
-            assert mine.state.shown == (MapMode.STANDARD,)
-            other = next(v for cid, v in app.views.items() if cid != sender_id)
-            assert other.state.shown == (MapMode.COMPACT,)
-            assert "standard" not in {u.get("value") for _, u in _drain(viewer)}
-            sent: list[str] = []
+            with client(port) as viewer:
+                _wait_clients(app, 2)
+                _drain(viewer)
+                mine = app.views[sender_id]
+                refused = app.gate.refused
+                shared = [
+                    (app.speed_dropdown, {"value": "bogus"}),
+                    (app.seek_slider, {"value": float("inf")}),
+                    (app.param_sliders["alpha"], {"value": "many"}),
+                    (app.param_boxes["delta"], {"value": 12}),
+                    (app.replay_path, {"value": 12}),
+                    (app.play_button, {"value": False}),
+                    (app.play_button, {"disabled": True}),  # not a client's to change
+                    (app.param_sliders["delta"], {"max": 1e9}),
+                    (app.param_boxes["delta"], {"value": "abc"}),  # last: its message stays
+                ]
+                own = [
+                    (mine.mode_dropdown, {"value": "bogus"}),
+                    (mine.colouring_dropdown, {"value": "nope"}),
+                    # (viser itself would make this one True)
+                    (mine.layer_checkboxes["truth"], {"value": "bogus"}),
+                    (mine.pin_button, {"value": False}),
+                ]
+                for handle, updates in shared + own:
+                    send(sender, handle, **updates)
+                until(
+                    lambda: (
+                        app.gate.refused >= refused + len(shared) and mine.gate.refused >= len(own)
+                    )
+                )
+                assert app.gate.refused == refused + len(shared)
+                assert mine.gate.refused == len(own)
+                attacked = {h._impl.uuid for h, _ in shared}  # type: ignore[attr-defined]
+                seen = [(uuid, u) for uuid, u in _drain(viewer) if uuid in attacked]
+                # the viewer only ever sees the values in force, sent back after each refusal
+                values = {repr(u.get("value")) for _, u in seen}
+                assert values and not values & {"'bogus'", "inf", "'many'", "'abc'", "12"}
+                assert all(set(u) == {"value"} for _, u in seen)
+                assert (
+                    app.speed_dropdown.value == "max" and app.param_boxes["delta"].value == "3.746"
+                )
+                assert mine.mode_dropdown.value == "compact" and mine.state.layers["truth"] is True
+                assert mine.colouring_dropdown.value == "loop closures by cluster"
+                assert app.param_sliders["delta"].max == 30.0
+                assert not app.play_button.disabled
+                assert app.replay.params == MapParams()
+                message = html.unescape(app.params_md.content)
+                assert "refused δ: 'abc' is not a number; δ stays 3.746" in message
+                # a valid value still works -- for the viewer who sent it only
+                send(sender, mine.mode_dropdown, value="standard")
+                until(lambda: mine.state.shown == (MapMode.STANDARD,))
+                assert mine.state.shown == (MapMode.STANDARD,)
+                other = next(v for cid, v in app.views.items() if cid != sender_id)
+                assert other.state.shown == (MapMode.COMPACT,)
+                assert "standard" not in {u.get("value") for _, u in _drain(viewer)}
+                sent: list[str] = []
 
-            class FakeClient:
-                client_id = sender_id
+                class FakeClient:
+                    client_id = sender_id
 
-                def send_file_download(self, name: str, content: bytes, **_: object) -> None:
-                    sent.append(name)
+                    def send_file_download(self, name: str, content: bytes, **_: object) -> None:
+                        sent.append(name)
 
-            app._download(FakeClient(), "g2o")  # type: ignore[arg-type]
-            assert sent == ["standard.g2o"]  # the map this viewer shows
+                app._download(FakeClient(), "g2o")  # type: ignore[arg-type]
+                assert sent == ["standard.g2o"]  # the map this viewer shows
+
+
+def _shared_handles(app: CogmapApp) -> dict[str, object]:
+    """The shared controls a rogue client tries to change, by key."""
+    return {
+        "alpha": app.param_sliders["alpha"],
+        "delta": app.param_sliders["delta"],
+        "seek": app.seek_slider,
+        "speed": app.speed_dropdown,
+        "box": app.param_boxes["delta"],
+    }
 
 
 def _shared_values(app: CogmapApp) -> dict[str, object]:
     """The values of the shared controls a rogue client tries to change."""
-    return {
-        "alpha": app.param_sliders["alpha"].value,
-        "delta": app.param_sliders["delta"].value,
-        "seek": app.seek_slider.value,
-        "speed": app.speed_dropdown.value,
-        "box": app.param_boxes["delta"].value,
-    }
+    return {key: h.value for key, h in _shared_handles(app).items()}  # type: ignore[attr-defined]
+
+
+#: The values of :func:`_shared_handles` in force at the start, paused at t = 0.
+IN_FORCE = {"alpha": 10.0, "delta": 3.746, "seek": 0.0, "speed": "max", "box": "3.746"}
 
 
 def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Path) -> None:
     with running_app(short_bag, autoplay=False) as app:
         wait(app)
+        handles = _shared_handles(app)
         before = _shared_values(app)
+        assert before == IN_FORCE
         refused = app.gate.refused
-        with _client(app.server.get_port()) as ws:  # never says hello
-            _send(ws, app.param_sliders["alpha"], {"value": 1e308})
-            _send(ws, app.param_sliders["delta"], {"value": 1.0})
-            _send(ws, app.seek_slider, {"value": float("inf")})
-            _send(ws, app.speed_dropdown, {"value": "bogus"})
-            _send(ws, app.param_boxes["delta"], {"value": "5"})  # valid, but not yet a client
-            deadline = time.monotonic() + 10
-            while app.gate.refused < refused + 5 and time.monotonic() < deadline:
-                time.sleep(0.01)
+        with client(app.server.get_port(), hello=False) as ws:  # never says hello
+            send(ws, handles["alpha"], value=1e308)
+            send(ws, handles["delta"], value=1.0)
+            send(ws, handles["seek"], value=float("inf"))
+            send(ws, handles["speed"], value="bogus")
+            send(ws, handles["box"], value="5")  # valid, but not yet a client
+            until(lambda: app.gate.refused >= refused + 5)
         assert app.gate.refused == refused + 5
         assert _shared_values(app) == before
         assert app.replay.params == MapParams()
-        # what a client joining later receives: the values in force
-        assert _buffered(app, app.param_sliders["alpha"]) in (None, before["alpha"])
-        assert _buffered(app, app.param_sliders["delta"]) in (None, before["delta"])
-        assert _buffered(app, app.speed_dropdown) in (None, before["speed"])
-        with _client(app.server.get_port()) as late:
-            _say_hello(late)
+        # what a client joining later receives: the values in force, sent back after each
+        # refusal (the last one, the box's, just after it was counted)
+        until(lambda: _buffered(app, handles["box"]) is not None, what="the box sent back")
+        assert {key: _buffered(app, h) for key, h in handles.items()} == IN_FORCE
+        with client(app.server.get_port()) as late:
             values = [u["value"] for _, u in _drain(late, 1.0) if "value" in u]
         assert not {1e308, 1.0, float("inf"), "bogus"} & set(values)
 

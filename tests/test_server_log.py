@@ -11,7 +11,7 @@ import pytest
 
 from app.cli import main
 from app.server import export
-from app.server.app import CogmapApp, recent_links
+from app.server.app import recent_links
 from app.server.export import summary_dict, summary_inputs
 from app.server.figures import false_link_label, layout_radius_label
 from app.server.replay import PlaybackState
@@ -23,7 +23,7 @@ from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
 from tests import test_server_support as support
 from tests.test_log_cli import square_run
-from tests.test_server_support import assert_same_map, counter, running_app
+from tests.test_server_support import assert_same_map, counter, running_app, wait
 
 short_bag = support.short_bag
 
@@ -43,10 +43,6 @@ def reference(square_log: Path) -> SlamSession:
     session = SlamSession(LOG_MAP_PARAMS, evaluation=reader.evaluation)
     session.run(reader.frames())
     return session
-
-
-def wait(app: CogmapApp) -> None:
-    assert app.wait_idle(60), "the replay did not settle"
 
 
 def test_a_log_replays_with_link_scores_and_no_camera(

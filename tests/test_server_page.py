@@ -15,10 +15,8 @@ import threading
 import time
 from pathlib import Path
 
-import msgspec
 import numpy as np
 import pytest
-import viser
 
 import app.server.replay as replay_module
 import app.server.view as view_module
@@ -31,40 +29,18 @@ from cogmap_core.config import MapParams
 from cogmap_core.evaluation import align_rigid_2d
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
-from tests.test_server_support import assert_same_map, camera_message, counter, running_app
+from tests.test_server_support import (
+    assert_same_map,
+    client,
+    counter,
+    running_app,
+    send,
+    until,
+    wait,
+)
 
 short_bag = support.short_bag
 reference = support.reference
-
-
-def wait(app: object) -> None:
-    assert app.wait_idle(60), "the replay did not settle"  # type: ignore[attr-defined]
-
-
-def until(condition: object, timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():  # type: ignore[operator]
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
-
-
-def hello(port: int) -> object:
-    from websockets.sync.client import connect
-
-    ws = connect(
-        f"ws://127.0.0.1:{port}",
-        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
-        max_size=None,
-        open_timeout=10,
-    )
-    ws.send(camera_message(1280, 800))
-    return ws
-
-
-def send(ws: object, handle: object, value: object) -> None:
-    uuid = handle._impl.uuid  # type: ignore[attr-defined]
-    message = {"type": "GuiUpdateMessage", "uuid": uuid, "updates": {"value": value}}
-    ws.send(msgspec.msgpack.encode(message))  # type: ignore[attr-defined]
 
 
 # ---------------------------------------------------------------------------- typed values
@@ -113,7 +89,7 @@ def test_typed_values_over_the_websocket_apply_exactly_or_are_refused(
     with running_app(short_bag) as app:
         wait(app)
         box = app.param_boxes["delta"]
-        with hello(app.server.get_port()) as ws:
+        with client(app.server.get_port()) as ws:
             until(lambda: len(app.views) == 1)
             steps = [
                 ("1e9", 30.0, "30", "δ = 1e9 is outside [1.05, 30]: using 30"),
@@ -125,7 +101,7 @@ def test_typed_values_over_the_websocket_apply_exactly_or_are_refused(
                 ("6", 6.0, "6", "δ = 6"),
             ]
             for typed, value, shown, said in steps:
-                send(ws, box, typed)
+                send(ws, box, value=typed)
                 until(lambda s=said: s in html.unescape(app.params_md.content))
                 until(lambda v=value, b=shown: app.replay.params.delta == v and box.value == b)
                 wait(app)
@@ -220,12 +196,12 @@ def test_playback_status_play_at_the_end_seek_follows_and_frame_numbers(
 def test_a_seek_note_lasts_until_the_next_typed_seek(short_bag: Path) -> None:
     with running_app(short_bag) as app:
         wait(app)
-        with hello(app.server.get_port()) as ws:
+        with client(app.server.get_port()) as ws:
             until(lambda: len(app.views) == 1)
-            send(ws, app.seek_box, "abc")
+            send(ws, app.seek_box, value="abc")
             until(lambda: "cogmap-message" in app.status_html.content)
             assert "abc" in html.unescape(app.status_html.content)
-            send(ws, app.seek_box, "1")  # a valid seek: the refusal is no longer news
+            send(ws, app.seek_box, value="1")  # a valid seek: the refusal is no longer news
             until(lambda: app.replay.frame_time <= 1.05)
             app._update_status(force=True)
             assert "cogmap-message" not in app.status_html.content
@@ -247,7 +223,7 @@ def test_a_tab_closed_while_its_page_is_built_leaves_no_view_and_no_error(
     with running_app(short_bag) as app:
         wait(app)
         capfd.readouterr()
-        with hello(app.server.get_port()):
+        with client(app.server.get_port()):
             assert building.wait(10)
         until(lambda: not app.server.get_clients())
         leave.set()
@@ -257,7 +233,7 @@ def test_a_tab_closed_while_its_page_is_built_leaves_no_view_and_no_error(
         printed = capfd.readouterr()
         assert "Task failed" not in printed.out + printed.err
         assert "removed" not in printed.out + printed.err
-        with hello(app.server.get_port()):  # the next tab gets its page
+        with client(app.server.get_port()):  # the next tab gets its page
             until(lambda: len(app.views) == 1)
 
 
@@ -268,7 +244,7 @@ def test_the_replay_waits_for_the_first_viewer(short_bag: Path) -> None:
         app._update_status(force=True)
         assert "waiting for the first viewer" in app.status_html.content
         assert app.replay.cursor == 0
-        with hello(app.server.get_port()):
+        with client(app.server.get_port()):
             until(lambda: app.replay.cursor > 0)
             assert app.replay.playing
 
@@ -305,17 +281,17 @@ def test_each_viewer_has_its_own_view(short_bag: Path, reference: SlamSession) -
     with running_app(short_bag) as app:
         wait(app)
         port = app.server.get_port()
-        with hello(port) as first:
+        with client(port) as first:
             until(lambda: len(app.views) == 1)
             mine = next(iter(app.views.values()))
-            with hello(port):
+            with client(port):
                 until(lambda: len(app.views) == 2)
                 other = next(v for v in app.views.values() if v is not mine)
-                send(first, mine.mode_dropdown, "standard")
-                send(first, mine.compare_checkbox, True)
-                send(first, mine.compare_dropdown, "compact")
-                send(first, mine.colouring_dropdown, "time")
-                send(first, mine.layer_checkboxes["odometry"], True)
+                send(first, mine.mode_dropdown, value="standard")
+                send(first, mine.compare_checkbox, value=True)
+                send(first, mine.compare_dropdown, value="compact")
+                send(first, mine.colouring_dropdown, value="time")
+                send(first, mine.layer_checkboxes["odometry"], value=True)
                 until(lambda: mine.state.layers["odometry"])
                 until(lambda: mine.state.colouring == "time")
                 layer = app.streamer.layers[MapMode.STANDARD]
@@ -354,7 +330,7 @@ def test_each_viewer_has_its_own_view(short_bag: Path, reference: SlamSession) -
 def test_the_shown_after_line_describes_the_latest_parameter_change(short_bag: Path) -> None:
     with running_app(short_bag) as app:
         wait(app)
-        with hello(app.server.get_port()):
+        with client(app.server.get_port()):
             until(lambda: len(app.views) == 1)
             view = next(iter(app.views.values()))
             for delta in (5.0, 6.0):
@@ -373,7 +349,7 @@ def test_the_shown_after_line_describes_the_latest_parameter_change(short_bag: P
 def test_inspect_pin_and_compare(short_bag: Path, reference: SlamSession) -> None:
     with running_app(short_bag) as app:
         wait(app)
-        with hello(app.server.get_port()):
+        with client(app.server.get_port()):
             until(lambda: len(app.views) == 1)
             view = next(iter(app.views.values()))
             compact = reference.maps[MapMode.COMPACT]

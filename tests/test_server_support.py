@@ -10,12 +10,15 @@ import contextlib
 import io
 import math
 import re
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 import viser
+from websockets.sync.client import ClientConnection, connect
 
 from app.server.app import CogmapApp
 from cogmap_core.cognitive_map import CognitiveMap
@@ -61,6 +64,21 @@ def running_app(bag: Path, **kwargs: object) -> Iterator[CogmapApp]:
         server.stop()
 
 
+def wait(app: CogmapApp) -> None:
+    """Wait until the replay has settled (played to where it stops, every rebuild done)."""
+    assert app.wait_idle(60), "the replay did not settle"
+
+
+def until(condition: Callable[[], object], timeout: float = 10.0, what: str = "") -> float:
+    """Poll ``condition()`` until it is true; fail after ``timeout`` s; return the seconds taken."""
+    started = time.monotonic()
+    while not condition():
+        if time.monotonic() - started > timeout:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what or condition}")
+        time.sleep(0.005)
+    return time.monotonic() - started
+
+
 def assert_same_map(actual: CognitiveMap, expected: CognitiveMap) -> None:
     """Exactly the same graph: ids, edges, counts, optimisations; poses to 1e-9."""
     assert actual.mode == expected.mode
@@ -99,10 +117,8 @@ CHROMIUM_ARGS = [
 ]
 
 
-def camera_message(width: int = 800, height: int = 600) -> bytes:
+def camera_message(width: int = 1280, height: int = 800) -> bytes:
     """What a browser sends first (its camera); viser then treats the connection as a client."""
-    import msgspec
-
     return msgspec.msgpack.encode(
         {
             "type": "ViewerCameraMessage",
@@ -117,3 +133,26 @@ def camera_message(width: int = 800, height: int = 600) -> bytes:
             "up_direction": (0.0, 0.0, 1.0),
         }
     )
+
+
+def client(port: int, *, hello: bool = True) -> ClientConnection:
+    """A websocket connection to the server on ``port``, as a browser's tab opens it.
+
+    With ``hello`` it sends its camera first (:func:`camera_message`), which makes viser treat
+    it as a client; without, it stays a connection that never said hello.
+    """
+    ws = connect(
+        f"ws://127.0.0.1:{port}",
+        subprotocols=[f"viser-v{viser.__version__}"],  # type: ignore[list-item]
+        max_size=None,
+        open_timeout=10,
+    )
+    if hello:
+        ws.send(camera_message())
+    return ws
+
+
+def send(ws: ClientConnection, handle: object, **updates: object) -> None:
+    """What a browser sends when its viewer changes ``handle``: ``send(ws, box, value="8")``."""
+    uuid = handle._impl.uuid  # type: ignore[attr-defined]
+    ws.send(msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": uuid, "updates": updates}))

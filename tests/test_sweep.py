@@ -315,6 +315,7 @@ def test_interrupted_sweep_resumes_without_recomputing(
     serial: dict[str, dict] = {}
     run_serially(second.cells, events, lambda cell, outcome: serial.update({cell.key: outcome}))
     table = ResultsTable(out / "results.csv").latest()
+    assert len(serial) == 8 and set(serial) == set(table)
     for key, outcome in serial.items():
         assert {c: table[key][c] for c in FIGURE_COLUMNS} == {c: outcome[c] for c in FIGURE_COLUMNS}
 
@@ -332,6 +333,7 @@ def test_interrupted_sweep_resumes_without_recomputing(
     )
     assert best["smallest_complete"]["params"]["delta"] == smallest["delta"]
     assert best["smallest_complete"]["vertices"] == smallest["vertices"]
+    assert best["front_ate"]
     for entry in best["front_ate"]:
         row = by_params[json.dumps(entry["params"])]
         assert not any(
