@@ -255,7 +255,7 @@ def test_a_viewers_change_counts_while_its_view_sets_controls_on_another_thread(
 ) -> None:
     with running_app(short_bag) as app:
         wait(app)
-        with hello(app.server.get_port()) as ws:
+        with client(app.server.get_port()) as ws:
             until(lambda: len(app.views) == 1)
             view = next(iter(app.views.values()))
             setting, release = threading.Event(), threading.Event()
@@ -270,7 +270,7 @@ def test_a_viewers_change_counts_while_its_view_sets_controls_on_another_thread(
             worker.start()
             try:
                 assert setting.wait(10)
-                send(ws, view.layer_checkboxes["odometry"], True)  # the viewer, meanwhile
+                send(ws, view.layer_checkboxes["odometry"], value=True)  # the viewer, meanwhile
                 until(lambda: view.state.layers["odometry"])
             finally:
                 release.set()
