@@ -121,7 +121,7 @@ def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> P
         "modes": [m.value for m in session.modes],
         "finished": session.finished,
         "epoch": meta.epoch,
-        "data_time": float(log.frame_time[-1]) if log.frames else 0.0,
+        "data_time": log.end_time,
         "frames": log.frames,
         "events": log.event_count,
         "bags": meta.bags,
@@ -646,9 +646,8 @@ def describe(meta: SessionMeta, session: SlamSession) -> str:
     """One line: data time, frames, bags and map sizes of a session."""
     log = session.log
     sizes = ", ".join(f"{m.value} {c.num_vertices} V" for m, c in session.maps.maps.items())
-    end = float(log.frame_time[-1]) if log.frames else 0.0
     return (
-        f"{log.frames} frames, {end:.1f} s of data from {len(meta.bags)} bag(s), "
+        f"{log.frames} frames, {log.end_time:.1f} s of data from {len(meta.bags)} bag(s), "
         f"{session.frontend.template_count} view templates; {sizes}"
     )
 

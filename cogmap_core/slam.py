@@ -311,6 +311,11 @@ class EventLog:
         return _read_only(self._frame_time[: self._n_frames])
 
     @property
+    def end_time(self) -> float:
+        """Data time (s) of the last frame logged (0.0 when there are no frames)."""
+        return float(self._frame_time[self._n_frames - 1]) if self._n_frames else 0.0
+
+    @property
     def ground_truth(self) -> NDArray[np.float64]:
         """``(n, 3)`` true poses of the frames that have one, in order (a read-only view)."""
         truth = self._truth[: self._n_frames]
@@ -587,8 +592,7 @@ class SlamSession:
 
     def finish(self) -> None:
         """End of data: run the final optimisation of every map (closes open clusters)."""
-        end = float(self.log.frame_time[-1]) if self.log.frames else 0.0
-        self.maps.finish(end)
+        self.maps.finish(self.log.end_time)
         self.finished = True
 
     # ------------------------------------------------------------------ rebuilding
@@ -618,8 +622,7 @@ class SlamSession:
             cmap = CognitiveMap(mode, params)
             cmap.apply_all(events)
             if finish:
-                end = float(self.log.frame_time[-1]) if self.log.frames else 0.0
-                cmap.finish(end)
+                cmap.finish(self.log.end_time)
             rebuilt[mode] = cmap
         return rebuilt
 
