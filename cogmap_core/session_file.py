@@ -51,7 +51,7 @@ from cogmap_core.fileio import atomic_writer, load_archive
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.frontend.local_view import MatchResult, ViewMatch
 from cogmap_core.frontend.pose_cells import _ViewCell
-from cogmap_core.map_graph import MapGraph
+from cogmap_core.map_graph import MapGraph, grow_array
 from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate
 from cogmap_core.scene_integration import KnownEdges, RevisitRun, SceneIntegration
 from cogmap_core.slam import EventLog, SlamSession
@@ -423,17 +423,13 @@ def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
     g = MapGraph()
     sizes = s["graph"]
     n, m = int(sizes["num_ids"]), int(sizes["num_edges_total"])
-    cap_v, cap_e = max(256, n), max(256, m)
     for name in ("pose", "vertex_time", "view", "alive", "alias", "alias_offset"):
-        current = getattr(g, name)
-        a = np.full((cap_v, *current.shape[1:]), -1 if name == "alias" else 0, current.dtype)
-        a[:n] = arrays[prefix + "graph." + name]
-        setattr(g, name, a)
+        fill = -1 if name == "alias" else 0
+        setattr(g, name, _graph_array(arrays, prefix + "graph." + name, getattr(g, name), n, fill))
     for name in ("from", "to", "rel", "time", "kind", "cluster", "alive"):
-        current = getattr(g, "edge_" + name)
-        a = np.full((cap_e, *current.shape[1:]), -1 if name == "cluster" else 0, current.dtype)
-        a[:m] = arrays[prefix + "graph.edge_" + name]
-        setattr(g, "edge_" + name, a)
+        fill = -1 if name == "cluster" else 0
+        key = prefix + "graph.edge_" + name
+        setattr(g, "edge_" + name, _graph_array(arrays, key, getattr(g, "edge_" + name), m, fill))
     g.num_ids, g.num_edges_total = n, m
     g.num_vertices = int(sizes["num_vertices"])
     g.num_edges = int(sizes["num_edges"])
@@ -516,6 +512,20 @@ def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
     cmap._hist_vertices = arrays[prefix + "size_history.vertices"].tolist()
     cmap._hist_edges = arrays[prefix + "size_history.edges"].tolist()
     return cmap
+
+
+def _graph_array(
+    arrays: Arrays, name: str, empty: NDArray[Any], rows: int, fill: int
+) -> NDArray[Any]:
+    """Saved array ``name`` (``rows`` rows) as a graph array like ``empty`` (a new graph's).
+
+    Grown as the graph grows its own: at least ``empty``'s capacity, the rows past ``rows``
+    holding ``fill``.
+    """
+    saved = arrays[name]
+    if saved.shape != (rows, *empty.shape[1:]):
+        raise SessionError(f"{name} does not match the graph")
+    return grow_array(saved.astype(empty.dtype, copy=False), max(empty.shape[0], rows), fill)
 
 
 def _load_records(arrays: Arrays, prefix: str, kind: type) -> list[Any]:
