@@ -159,25 +159,17 @@ class EventLog:
 
         ``columns`` may hold a ``score`` column (per event; NaN: none); without it no link has a
         score. ``ground_truth`` is ``(F, 3)``; ``has_truth`` marks the frames that have it
-        (default: all when ``ground_truth`` is given).
+        (default: all when ``ground_truth`` is given). Built by :meth:`extend`, which refuses
+        frame ends that do not match the events (``ValueError``).
         """
         log = cls()
-        n = int(np.asarray(columns["kind"]).shape[0])
-        f = int(np.asarray(frame_end).shape[0])
-        log._reserve_events(n)
-        log._reserve_frames(f)
-        for name in _EVENT_COLUMNS:
-            getattr(log, "_" + name)[:n] = np.asarray(columns[name])
-        if "score" in columns:
-            log._score[:n] = np.asarray(columns["score"], dtype=np.float64)
-        log._frame_end[:f] = np.asarray(frame_end, dtype=np.int64)
-        log._frame_time[:f] = np.asarray(frame_time, dtype=np.float64)
+        log.extend(columns, frame_end, frame_time)
+        f = log._n_frames
         if ground_truth is not None:
             log._truth[:f] = np.asarray(ground_truth, dtype=np.float64).reshape(f, 3)
             mask = np.ones(f, dtype=bool) if has_truth is None else np.asarray(has_truth, bool)
             log._has_truth[:f] = mask
             log._truth_frames = int(np.count_nonzero(mask))
-        log._n_events, log._n_frames = n, f
         return log
 
     def append_frame(
