@@ -321,29 +321,11 @@ class EventLog:
         return _read_only(self._has_truth[: self._n_frames])
 
     @property
-    def link_robot_truth(self) -> list[tuple[float, float, float] | None]:
-        """Per loop closure (link event), the true pose at its frame (None where unknown)."""
-        links = np.flatnonzero(self._kind[: self._n_events] == KIND_LINK)
-        frame = np.searchsorted(self._frame_end[: self._n_frames], links, side="right")
-        truth = self._truth[frame].tolist()
-        known = self._has_truth[frame].tolist()
-        return [tuple(t) if ok else None for t, ok in zip(truth, known, strict=True)]  # type: ignore[misc]
-
-    @property
     def link_scores(self) -> list[float | None]:
         """Per loop closure (link event), its place-recognition score (None where unknown)."""
         n = self._n_events
         scores = self._score[:n][self._kind[:n] == KIND_LINK].tolist()
         return [None if s != s else s for s in scores]  # NaN: no score
-
-    def link_score(self, k: int) -> float | None:
-        """Place-recognition score of link ``k`` of :meth:`link_table` (None when unknown)."""
-        n = self._n_events
-        links = np.flatnonzero(self._kind[:n] == KIND_LINK)
-        if not 0 <= k < links.size:
-            return None
-        score = float(self._score[links[k]])
-        return None if np.isnan(score) else score
 
     def columns(self, stop: int | None = None) -> dict[str, NDArray[Any]]:
         """The columns of the first ``stop`` events (default all), as read-only views.
