@@ -103,13 +103,7 @@ class SessionMeta:
 def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> Path:
     """Write ``session`` to ``path`` atomically (a temporary file, then a rename)."""
     path = Path(path)
-    state: Json = {}
-    arrays: Arrays = {}
-    _save_frontend(session.frontend, state, arrays)
-    _save_log(session.log, arrays)
-    state["maps"] = {}
-    for mode, cmap in session.maps.maps.items():
-        state["maps"][mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    state, arrays = _collect(session)
     log = session.log
     header = {
         "format": FORMAT_NAME,
@@ -134,6 +128,18 @@ def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> P
     with atomic_writer(path, binary=True) as handle:
         np.savez_compressed(handle, **arrays)
     return path
+
+
+def _collect(session: SlamSession) -> tuple[Json, Arrays]:
+    """What a session file holds of ``session``: the state's scalars and its arrays."""
+    state: Json = {}
+    arrays: Arrays = {}
+    _save_frontend(session.frontend, state, arrays)
+    _save_log(session.log, arrays)
+    state["maps"] = {}
+    for mode, cmap in session.maps.maps.items():
+        state["maps"][mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    return state, arrays
 
 
 def _save_frontend(frontend: FrontEnd, state: Json, arrays: Arrays) -> None:
@@ -629,15 +635,8 @@ def same_state(a: SlamSession, b: SlamSession) -> bool:
 
     Optimisations' wall times are measurements, not state, and are not compared.
     """
-    state_a: Json = {}
-    state_b: Json = {}
-    arrays_a: Arrays = {}
-    arrays_b: Arrays = {}
-    for session, state, arrays in ((a, state_a, arrays_a), (b, state_b, arrays_b)):
-        _save_frontend(session.frontend, state, arrays)
-        _save_log(session.log, arrays)
-        for mode, cmap in session.maps.maps.items():
-            state[mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    state_a, arrays_a = _collect(a)
+    state_b, arrays_b = _collect(b)
     if json.dumps(state_a, sort_keys=True) != json.dumps(state_b, sort_keys=True):
         return False
     if set(arrays_a) != set(arrays_b):
