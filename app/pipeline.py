@@ -364,8 +364,7 @@ class HeadlessPipeline:
             self.session = self._start_session()
             offset = 0.0
             if isinstance(reader, BagReader):  # a bag: what a session needs to know of it
-                log = self.session.log
-                end = float(log.frame_time[-1]) if log.frames else 0.0
+                end = self.session.log.end_time
                 if self.meta is None:
                     self.meta = SessionMeta(
                         epoch=reader.start_stamp, image_scale=self.options.image_scale

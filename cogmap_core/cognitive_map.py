@@ -479,7 +479,7 @@ class CognitiveMap:
             return None  # no edge added since the last optimisation: it would change nothing
         self._edges_at_last_optimization = graph.num_edges_total
         self._optimized_once = True
-        pose_graph = graph.to_pose_graph(self.params.link_sigmas())
+        pose_graph = self.to_pose_graph()
         if pose_graph.num_edges == 0:
             return None
         started = wallclock.perf_counter()

@@ -179,7 +179,6 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
     if from_edges:  # edges only: one vertex per id they name, in id order
         ids = sorted({vid for _, vi, vj, _, _, _ in edges for vid in (vi, vj)})
         index_of = {vid: k for k, vid in enumerate(ids)}
-        poses = [[0.0, 0.0, 0.0]] * len(ids)
     if not ids:
         raise G2oFormatError(
             f"{path}: no VERTEX_SE2/VERTEX2 or EDGE_SE2/EDGE2 line; is this a 2D g2o pose graph?"

@@ -84,9 +84,16 @@ class MapSnapshot:
 
     def edge_ends(self) -> tuple[IntArray, IntArray]:
         """Per edge, the row (in this snapshot's vertex arrays) of its first and second vertex."""
-        rows = np.searchsorted(self.vertex_ids, np.r_[self.edge_from, self.edge_to])
-        m = self.edge_from.shape[0]
-        return rows[:m], rows[m:]
+        return _edge_rows(self.vertex_ids, self.edge_from, self.edge_to)
+
+
+def _edge_rows(
+    vertex_ids: IntArray, edge_from: IntArray, edge_to: IntArray
+) -> tuple[IntArray, IntArray]:
+    """Per edge, the row in ascending ``vertex_ids`` of its first and second vertex."""
+    rows = np.searchsorted(vertex_ids, np.r_[edge_from, edge_to])
+    m = edge_from.shape[0]
+    return rows[:m], rows[m:]
 
 
 def grow_array(array: NDArray, size: int, fill: float = 0) -> NDArray:
@@ -327,16 +334,15 @@ class MapGraph:
         """
         ids = self.live_ids()
         e = self.live_edges()
-        index = np.searchsorted(ids, np.r_[self.edge_from[e], self.edge_to[e]])
-        m = e.shape[0]
+        edge_from, edge_to = _edge_rows(ids, self.edge_from[e], self.edge_to[e])
         fixed = np.zeros(ids.shape[0], dtype=bool)
         if fixed.size:
             fixed[0] = True
         return PoseGraph(
             vertex_ids=ids,
             poses=self.pose[ids].copy(),
-            edge_from=index[:m],
-            edge_to=index[m:],
+            edge_from=edge_from,
+            edge_to=edge_to,
             measurements=self.edge_rel[e].copy(),
             information=edge_information(self.edge_kind[e], self.edge_rel[e], link_sigmas),
             fixed=fixed,

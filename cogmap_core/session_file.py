@@ -51,7 +51,7 @@ from cogmap_core.fileio import atomic_writer, load_archive
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.frontend.local_view import MatchResult, ViewMatch
 from cogmap_core.frontend.pose_cells import _ViewCell
-from cogmap_core.map_graph import MapGraph
+from cogmap_core.map_graph import MapGraph, grow_array
 from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate
 from cogmap_core.scene_integration import KnownEdges, RevisitRun, SceneIntegration
 from cogmap_core.slam import EventLog, SlamSession
@@ -103,13 +103,7 @@ class SessionMeta:
 def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> Path:
     """Write ``session`` to ``path`` atomically (a temporary file, then a rename)."""
     path = Path(path)
-    state: Json = {}
-    arrays: Arrays = {}
-    _save_frontend(session.frontend, state, arrays)
-    _save_log(session.log, arrays)
-    state["maps"] = {}
-    for mode, cmap in session.maps.maps.items():
-        state["maps"][mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    state, arrays = _collect(session)
     log = session.log
     header = {
         "format": FORMAT_NAME,
@@ -121,7 +115,7 @@ def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> P
         "modes": [m.value for m in session.modes],
         "finished": session.finished,
         "epoch": meta.epoch,
-        "data_time": float(log.frame_time[-1]) if log.frames else 0.0,
+        "data_time": log.end_time,
         "frames": log.frames,
         "events": log.event_count,
         "bags": meta.bags,
@@ -134,6 +128,18 @@ def save_session(path: Path | str, session: SlamSession, meta: SessionMeta) -> P
     with atomic_writer(path, binary=True) as handle:
         np.savez_compressed(handle, **arrays)
     return path
+
+
+def _collect(session: SlamSession) -> tuple[Json, Arrays]:
+    """What a session file holds of ``session``: the state's scalars and its arrays."""
+    state: Json = {}
+    arrays: Arrays = {}
+    _save_frontend(session.frontend, state, arrays)
+    _save_log(session.log, arrays)
+    state["maps"] = {}
+    for mode, cmap in session.maps.maps.items():
+        state["maps"][mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    return state, arrays
 
 
 def _save_frontend(frontend: FrontEnd, state: Json, arrays: Arrays) -> None:
@@ -410,11 +416,12 @@ def _load_log(arrays: Arrays) -> EventLog:
     }
     if "log.score" in arrays:  # links' place-recognition scores (absent from older files)
         columns["score"] = arrays["log.score"]
-    frame_end = arrays["log.frame_end"]
-    if frame_end.size and frame_end[-1] != columns["kind"].shape[0]:
-        raise SessionError("the frame table does not match the events")
-    return EventLog.from_columns(
-        columns, frame_end, arrays["log.frame_time"], arrays["log.truth"], arrays["log.has_truth"]
+    return EventLog.from_columns(  # (ValueError when the frame ends do not match the events)
+        columns,
+        arrays["log.frame_end"],
+        arrays["log.frame_time"],
+        arrays["log.truth"],
+        arrays["log.has_truth"],
     )
 
 
@@ -423,17 +430,13 @@ def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
     g = MapGraph()
     sizes = s["graph"]
     n, m = int(sizes["num_ids"]), int(sizes["num_edges_total"])
-    cap_v, cap_e = max(256, n), max(256, m)
     for name in ("pose", "vertex_time", "view", "alive", "alias", "alias_offset"):
-        current = getattr(g, name)
-        a = np.full((cap_v, *current.shape[1:]), -1 if name == "alias" else 0, current.dtype)
-        a[:n] = arrays[prefix + "graph." + name]
-        setattr(g, name, a)
+        fill = -1 if name == "alias" else 0
+        setattr(g, name, _graph_array(arrays, prefix + "graph." + name, getattr(g, name), n, fill))
     for name in ("from", "to", "rel", "time", "kind", "cluster", "alive"):
-        current = getattr(g, "edge_" + name)
-        a = np.full((cap_e, *current.shape[1:]), -1 if name == "cluster" else 0, current.dtype)
-        a[:m] = arrays[prefix + "graph.edge_" + name]
-        setattr(g, "edge_" + name, a)
+        fill = -1 if name == "cluster" else 0
+        key = prefix + "graph.edge_" + name
+        setattr(g, "edge_" + name, _graph_array(arrays, key, getattr(g, "edge_" + name), m, fill))
     g.num_ids, g.num_edges_total = n, m
     g.num_vertices = int(sizes["num_vertices"])
     g.num_edges = int(sizes["num_edges"])
@@ -516,6 +519,20 @@ def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
     cmap._hist_vertices = arrays[prefix + "size_history.vertices"].tolist()
     cmap._hist_edges = arrays[prefix + "size_history.edges"].tolist()
     return cmap
+
+
+def _graph_array(
+    arrays: Arrays, name: str, empty: NDArray[Any], rows: int, fill: int
+) -> NDArray[Any]:
+    """Saved array ``name`` (``rows`` rows) as a graph array like ``empty`` (a new graph's).
+
+    Grown as the graph grows its own: at least ``empty``'s capacity, the rows past ``rows``
+    holding ``fill``.
+    """
+    saved = arrays[name]
+    if saved.shape != (rows, *empty.shape[1:]):
+        raise SessionError(f"{name} does not match the graph")
+    return grow_array(saved.astype(empty.dtype, copy=False), max(empty.shape[0], rows), fill)
 
 
 def _load_records(arrays: Arrays, prefix: str, kind: type) -> list[Any]:
@@ -618,15 +635,8 @@ def same_state(a: SlamSession, b: SlamSession) -> bool:
 
     Optimisations' wall times are measurements, not state, and are not compared.
     """
-    state_a: Json = {}
-    state_b: Json = {}
-    arrays_a: Arrays = {}
-    arrays_b: Arrays = {}
-    for session, state, arrays in ((a, state_a, arrays_a), (b, state_b, arrays_b)):
-        _save_frontend(session.frontend, state, arrays)
-        _save_log(session.log, arrays)
-        for mode, cmap in session.maps.maps.items():
-            state[mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+    state_a, arrays_a = _collect(a)
+    state_b, arrays_b = _collect(b)
     if json.dumps(state_a, sort_keys=True) != json.dumps(state_b, sort_keys=True):
         return False
     if set(arrays_a) != set(arrays_b):
@@ -646,9 +656,8 @@ def describe(meta: SessionMeta, session: SlamSession) -> str:
     """One line: data time, frames, bags and map sizes of a session."""
     log = session.log
     sizes = ", ".join(f"{m.value} {c.num_vertices} V" for m, c in session.maps.maps.items())
-    end = float(log.frame_time[-1]) if log.frames else 0.0
     return (
-        f"{log.frames} frames, {end:.1f} s of data from {len(meta.bags)} bag(s), "
+        f"{log.frames} frames, {log.end_time:.1f} s of data from {len(meta.bags)} bag(s), "
         f"{session.frontend.template_count} view templates; {sizes}"
     )
 

@@ -159,25 +159,17 @@ class EventLog:
 
         ``columns`` may hold a ``score`` column (per event; NaN: none); without it no link has a
         score. ``ground_truth`` is ``(F, 3)``; ``has_truth`` marks the frames that have it
-        (default: all when ``ground_truth`` is given).
+        (default: all when ``ground_truth`` is given). Built by :meth:`extend`, which refuses
+        frame ends that do not match the events (``ValueError``).
         """
         log = cls()
-        n = int(np.asarray(columns["kind"]).shape[0])
-        f = int(np.asarray(frame_end).shape[0])
-        log._reserve_events(n)
-        log._reserve_frames(f)
-        for name in _EVENT_COLUMNS:
-            getattr(log, "_" + name)[:n] = np.asarray(columns[name])
-        if "score" in columns:
-            log._score[:n] = np.asarray(columns["score"], dtype=np.float64)
-        log._frame_end[:f] = np.asarray(frame_end, dtype=np.int64)
-        log._frame_time[:f] = np.asarray(frame_time, dtype=np.float64)
+        log.extend(columns, frame_end, frame_time)
+        f = log._n_frames
         if ground_truth is not None:
             log._truth[:f] = np.asarray(ground_truth, dtype=np.float64).reshape(f, 3)
             mask = np.ones(f, dtype=bool) if has_truth is None else np.asarray(has_truth, bool)
             log._has_truth[:f] = mask
             log._truth_frames = int(np.count_nonzero(mask))
-        log._n_events, log._n_frames = n, f
         return log
 
     def append_frame(
@@ -311,6 +303,11 @@ class EventLog:
         return _read_only(self._frame_time[: self._n_frames])
 
     @property
+    def end_time(self) -> float:
+        """Data time (s) of the last frame logged (0.0 when there are no frames)."""
+        return float(self._frame_time[self._n_frames - 1]) if self._n_frames else 0.0
+
+    @property
     def ground_truth(self) -> NDArray[np.float64]:
         """``(n, 3)`` true poses of the frames that have one, in order (a read-only view)."""
         truth = self._truth[: self._n_frames]
@@ -324,29 +321,11 @@ class EventLog:
         return _read_only(self._has_truth[: self._n_frames])
 
     @property
-    def link_robot_truth(self) -> list[tuple[float, float, float] | None]:
-        """Per loop closure (link event), the true pose at its frame (None where unknown)."""
-        links = np.flatnonzero(self._kind[: self._n_events] == KIND_LINK)
-        frame = np.searchsorted(self._frame_end[: self._n_frames], links, side="right")
-        truth = self._truth[frame].tolist()
-        known = self._has_truth[frame].tolist()
-        return [tuple(t) if ok else None for t, ok in zip(truth, known, strict=True)]  # type: ignore[misc]
-
-    @property
     def link_scores(self) -> list[float | None]:
         """Per loop closure (link event), its place-recognition score (None where unknown)."""
         n = self._n_events
         scores = self._score[:n][self._kind[:n] == KIND_LINK].tolist()
         return [None if s != s else s for s in scores]  # NaN: no score
-
-    def link_score(self, k: int) -> float | None:
-        """Place-recognition score of link ``k`` of :meth:`link_table` (None when unknown)."""
-        n = self._n_events
-        links = np.flatnonzero(self._kind[:n] == KIND_LINK)
-        if not 0 <= k < links.size:
-            return None
-        score = float(self._score[links[k]])
-        return None if np.isnan(score) else score
 
     def columns(self, stop: int | None = None) -> dict[str, NDArray[Any]]:
         """The columns of the first ``stop`` events (default all), as read-only views.
@@ -587,8 +566,7 @@ class SlamSession:
 
     def finish(self) -> None:
         """End of data: run the final optimisation of every map (closes open clusters)."""
-        end = float(self.log.frame_time[-1]) if self.log.frames else 0.0
-        self.maps.finish(end)
+        self.maps.finish(self.log.end_time)
         self.finished = True
 
     # ------------------------------------------------------------------ rebuilding
@@ -618,8 +596,7 @@ class SlamSession:
             cmap = CognitiveMap(mode, params)
             cmap.apply_all(events)
             if finish:
-                end = float(self.log.frame_time[-1]) if self.log.frames else 0.0
-                cmap.finish(end)
+                cmap.finish(self.log.end_time)
             rebuilt[mode] = cmap
         return rebuilt
 

@@ -378,7 +378,7 @@ def evaluate_cell(
     started = time.perf_counter()
     cmap = CognitiveMap(mode, params)
     cmap.apply_all(log.events)
-    end = float(log.frame_time[-1]) if log.frames else 0.0
+    end = log.end_time
     cmap.finish(end)
     built = time.perf_counter()
     summary = optimisation_summary(cmap)

@@ -38,6 +38,14 @@ def all_events() -> list[MapEvent]:
     return [e for events, _, _ in FRAMES for e in events]
 
 
+def truth_at_links(log: EventLog) -> list[tuple[float, ...] | None]:
+    """Per link of ``link_table``, the true pose of its frame (None: that frame has none)."""
+    truth = iter(log.ground_truth.tolist())
+    per_frame = [tuple(next(truth)) if known else None for known in log.has_truth.tolist()]
+    frame_at = {t: k for k, t in enumerate(log.frame_time.tolist())}
+    return [per_frame[frame_at[t]] for t, _, _ in log.link_table()]
+
+
 def test_events_come_back_as_given() -> None:
     log = build()
     events = all_events()
@@ -58,7 +66,7 @@ def test_ground_truth_per_frame_and_per_link() -> None:
     assert log.ground_truth.tolist() == [[0.0, 0.0, 0.0], [0.5, 0.0, 0.25], [0.0, 0.1, 3.0]]
     assert log.has_truth.tolist() == [True, True, False, True, False]
     assert not log.has_ground_truth()
-    assert log.link_robot_truth == [(0.0, 0.1, 3.0), None]
+    assert truth_at_links(log) == [(0.0, 0.1, 3.0), None]
     assert log.link_table() == [(0.3, 0, 0.5), (0.4, 1, -0.25)]
 
 
@@ -84,7 +92,7 @@ def test_truncated_and_recording_round_trip() -> None:
     log = build()
     part = log.truncated(4)
     assert list(part.events) == all_events()[:8] and part.frames == 4
-    assert part.link_robot_truth == [(0.0, 0.1, 3.0)]
+    assert truth_at_links(part) == [(0.0, 0.1, 3.0)]
     full = EventLog()
     for events, time, truth in FRAMES:
         full.append_frame(events, time, truth or (1.0, 2.0, 3.0))
@@ -122,7 +130,10 @@ def test_link_scores_are_a_column() -> None:
     log.append_frame([Odometry(0.2, 0.1, 0.0), *links], 0.2, link_scores=(0.9, 0.85))
     log.append_frame([LinkToVertex(0.3, 0, 0.0)], 0.3)  # a camera front end's: no score
     assert log.link_scores == [0.9, 0.85, None]
-    assert [log.link_score(k) for k in range(4)] == [0.9, 0.85, None, None]
+    links = [(0.2, 0, 0.0), (0.2, 1, 0.0), (0.3, 0, 0.0)]  # link_table's order, no fourth link
+    assert list(zip(log.link_table(), log.link_scores, strict=True)) == list(
+        zip(links, [0.9, 0.85, None], strict=True)
+    )
     assert log.truncated(3).link_scores == [0.9, 0.85]
     score = log.columns()["score"]
     assert np.isnan(score[:5]).all()  # NaN for events other than links ...

@@ -499,10 +499,11 @@ def test_the_session_format_knows_every_attribute() -> None:
         assert set(vars(obj)) == KNOWN_ATTRIBUTES[cls], cls.__name__
     # rebuilt by adding the saved templates again (the same adds make the same index)
     assert set(vars(LocalViewCells(config))) == {
-        "config", "last_match", "max_sad", "_capacity", "_count", "_desc1", "_desc2", "_dtype",
-        "_ids", "_indexed", "_k1", "_k2", "_keys", "_keys_all", "_l1", "_l2", "_n_off",
-        "_offsets", "_ones1", "_ones2", "_pixels", "_plans", "_query", "_rad_per_column",
-        "_shift", "_signs", "_sorted1", "_templates", "_width", "_windows", "_x", "_y",
+        "config", "last_match", "max_sad", "_candidates", "_capacity", "_count", "_desc1",
+        "_desc2", "_dtype", "_ids", "_indexed", "_k1", "_k2", "_keys", "_keys_all", "_l1", "_l2",
+        "_n_off", "_offsets", "_ones1", "_ones2", "_pixels", "_plans", "_query",
+        "_rad_per_column", "_shift", "_signs", "_sorted1", "_templates", "_width", "_windows",
+        "_x", "_y",
     }  # fmt: skip
     # saved: cells and best; the rest follows from the settings
     assert set(vars(PoseCellNetwork(config))) == {

@@ -151,7 +151,8 @@ class LocalViewCells:
         self._capacity = 0
         self._templates = np.zeros((0, self._y, self._x), dtype=np.int16)
         self._keys_all = np.zeros((0, self._n_off), dtype=np.int32)  # level-0 key of each pair
-        self._signs = _key_candidates(self._l1[0].shape[0], self._l1[1].shape[1])[0]
+        self._candidates = _key_candidates(self._l1[0].shape[0], self._l1[1].shape[1])
+        self._signs = self._candidates[0]
         self._desc1 = np.zeros((0, self._n_off, self._k1), dtype=dt)
         self._desc2 = np.zeros((0, self._n_off, self._k2), dtype=dt)
         self._grow(_INITIAL_CAPACITY)
@@ -260,8 +261,13 @@ class LocalViewCells:
         """Choose the key's signs, then sort the pairs of all templates by key for search."""
         n = self._count
         desc1 = self._desc1[:n].reshape(-1, self._k1).astype(np.float64)
-        candidates = _key_candidates(self._l1[0].shape[0], self._l1[1].shape[1])
-        spread = (desc1 @ candidates.T).std(axis=0)
+        desc1 -= desc1.mean(axis=0)
+        # A key's spread: its variance over the pairs, c^T C c with C the descriptors' covariance
+        # (here times the number of pairs): std(desc1 @ c) ranked without the pairs x candidates
+        # product.
+        scatter = desc1.T @ desc1
+        candidates = self._candidates
+        spread = np.einsum("ij,jk,ik->i", candidates, scatter, candidates)
         signs = candidates[int(np.argmax(spread))]  # first of the widest: deterministic
         if not np.array_equal(signs, self._signs):
             self._signs = signs
