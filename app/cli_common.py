@@ -23,22 +23,36 @@ from cogmap_core.sources.detect import (
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
 
 
-def add_topic_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--image-topic``, ``--odom-topic``, ``--gt-topic``, ``--no-ground-truth``."""
+def add_topic_arguments(
+    parser: argparse.ArgumentParser, ground_truth_optional: bool = True
+) -> None:
+    """``--image-topic``, ``--odom-topic``, ``--gt-topic`` and ``--no-ground-truth``.
+
+    Args:
+        parser: the command's parser.
+        ground_truth_optional: offer ``--no-ground-truth``; ``False`` for a command that always
+            needs the ground truth (``cogmap sweep``), whose parser then rejects the option as
+            unrecognized.
+
+    """
     parser.add_argument("--image-topic", default=IMAGE_TOPIC, help=f"(default {IMAGE_TOPIC})")
     parser.add_argument("--odom-topic", default=ODOMETRY_TOPIC, help=f"(default {ODOMETRY_TOPIC})")
     parser.add_argument(
         "--gt-topic", default=GROUND_TRUTH_TOPIC, help=f"(default {GROUND_TRUTH_TOPIC})"
     )
-    parser.add_argument("--no-ground-truth", action="store_true", help="ignore the ground truth")
+    if ground_truth_optional:
+        parser.add_argument(
+            "--no-ground-truth", action="store_true", help="ignore the ground truth"
+        )
 
 
 def topics_from_args(args: argparse.Namespace) -> BagTopics:
-    """The topics chosen on the command line."""
+    """The topics chosen on the command line (no ``--no-ground-truth``: the ground truth's)."""
+    ignore_ground_truth = getattr(args, "no_ground_truth", False)
     return BagTopics(
         image=args.image_topic,
         odometry=args.odom_topic,
-        ground_truth=None if args.no_ground_truth else args.gt_topic,
+        ground_truth=None if ignore_ground_truth else args.gt_topic,
     )
 
 

@@ -500,7 +500,6 @@ def test_params_files(tmp_path: Path, capsys):
         (["--delta", "2,3", "--param", "delta=4,5"], "delta is given twice"),
         (["--delta", "2:8:3", "--samples", "0"], "samples 0: give a whole number >= 1"),
         (["--delta", "2,3", "--workers", "0"], "--workers 0: give at least 1"),
-        (["--delta", "2,3", "--no-ground-truth"], "drop --no-ground-truth"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(extra, message, tmp_path: Path, capsys):
@@ -509,6 +508,24 @@ def test_bad_input_is_one_line_and_exit_2(extra, message, tmp_path: Path, capsys
     line = _error_line(capsys)
     assert line.startswith("cogmap sweep: error: ") and message in line
     assert not out.exists()  # rejected before anything is written
+
+
+def test_sweep_does_not_offer_no_ground_truth(tmp_path: Path, capsys):
+    # a sweep measures every map against the ground truth: its parser has no such option, so
+    # argparse rejects it as unrecognized (run and serve keep it)
+    with pytest.raises(SystemExit) as info:
+        main(["sweep", "--help"])
+    assert info.value.code == 0
+    sweep_help = capsys.readouterr().out
+    assert "--gt-topic" in sweep_help and "--no-ground-truth" not in sweep_help
+    for command in (["run", "--out", str(tmp_path / "run")], ["serve"]):
+        assert build_parser().parse_args([*command, "--no-ground-truth"]).no_ground_truth
+    out = tmp_path / "sweep"
+    with pytest.raises(SystemExit) as info:
+        main(["sweep", str(RECORDED), "--out", str(out), "--delta", "2,3", "--no-ground-truth"])
+    assert info.value.code == 2
+    assert _error_line(capsys) == "cogmap: error: unrecognized arguments: --no-ground-truth"
+    assert not out.exists()
 
 
 @pytest.mark.parametrize(
