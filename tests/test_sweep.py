@@ -381,6 +381,50 @@ def test_a_failing_cell_is_recorded_and_the_sweep_goes_on(tmp_path: Path, in_pro
     assert json.loads((out / "sweep.json").read_text())["status"] == "incomplete"
 
 
+def test_a_finished_sweep_resumes_without_loading_the_events(
+    tmp_path: Path, in_process_client, monkeypatch: pytest.MonkeyPatch
+):
+    import app.sweep
+
+    source = bag_source(RECORDED, None, BagTopics())
+    options = SweepOptions(spec=sweep_spec({"delta": "3,6"}))
+    out = tmp_path / "sweep"
+    assert Sweep([source], out, options, client=in_process_client).run().computed == 3
+    results, best = (out / "results.csv").read_bytes(), (out / "best.json").read_bytes()
+    (record,) = json.loads((out / "sweep.json").read_text())["bags"]
+    expected_ate = EventLog.from_recording(load_event_file(RECORDED)).dead_reckoning_ate()
+    assert record["dead_reckoning_ate_m"] == expected_ate
+
+    def refuse(path: Path) -> None:
+        raise AssertionError(f"a finished sweep loaded {path}")
+
+    monkeypatch.setattr(app.sweep, "load_event_file", refuse)
+    said: list[str] = []
+    again = Sweep([source], out, options, say=said.append).run()  # no cluster needed either
+    assert (again.computed, again.skipped, again.failed) == (0, 3, 0)
+    assert (out / "results.csv").read_bytes() == results
+    assert (out / "best.json").read_bytes() == best
+    manifest = json.loads((out / "sweep.json").read_text())
+    assert manifest["status"] == "complete" and manifest["bags"] == [record]
+    assert any("every cell done, events not loaded" in line for line in said)
+
+    # a manifest without the figure (older, or cut short): the events are loaded, it is computed
+    manifest["bags"] = [{k: v for k, v in record.items() if k != "dead_reckoning_ate_m"}]
+    (out / "sweep.json").write_text(json.dumps(manifest))
+    loaded: list[Path] = []
+
+    def counting(path: Path) -> object:
+        loaded.append(Path(path))
+        return load_event_file(path)
+
+    monkeypatch.setattr(app.sweep, "load_event_file", counting)
+    assert Sweep([source], out, options).run().computed == 0
+    assert loaded == [out / "events" / source.events_name]
+    assert json.loads((out / "sweep.json").read_text())["bags"] == [record]
+    assert (out / "results.csv").read_bytes() == results
+    assert (out / "best.json").read_bytes() == best
+
+
 def test_workers_can_read_the_events_from_the_folder(tmp_path: Path, in_process_client):
     from app.sweep import check_worker_paths
 
