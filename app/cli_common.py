@@ -21,6 +21,7 @@ from cogmap_core.sources.detect import (
     resolve_format,
 )
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
+from cogmap_core.sweep import normalise_parameter_name
 
 
 def add_topic_arguments(
@@ -110,7 +111,9 @@ def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
     """The map parameters given on the command line (name -> value), validated.
 
     Every parameter a ``--params`` file names (a sweep's best.json names all), then the flags and
-    ``--param`` values over it.
+    ``--param`` values over it. ``--param`` names are spelled as in sweep specs
+    (:func:`~cogmap_core.sweep.normalise_parameter_name`: ``huber-scale`` is ``huber_scale``);
+    unknown ones are reported together by :meth:`MapParams.with_changes`.
     """
     file = getattr(args, "params_file", None)
     changes: dict[str, float] = load_params_changes(file) if file else {}
@@ -120,8 +123,8 @@ def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
         if getattr(args, name, None) is not None
     }
     for item in getattr(args, "param", []) or []:
-        name, sep, text = item.partition("=")
-        name = name.strip().replace("-", "_")
+        written_name, sep, text = item.partition("=")
+        name = normalise_parameter_name(written_name)
         if not sep or not name:
             raise ParameterError(f"--param {item!r}: expected NAME=VALUE, e.g. huber_scale=0.2")
         if name in _PAPER_FLAGS:

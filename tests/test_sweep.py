@@ -40,6 +40,7 @@ from cogmap_core.sweep import (
     evaluate_cell,
     front_ate,
     front_completeness,
+    parameter_name,
     pareto_mask,
     parse_parameter,
     smallest_complete,
@@ -533,6 +534,30 @@ def test_params_files(tmp_path: Path, capsys):
         f"cogmap run: error: {tmp_path / 'no.json'}: no such parameter file; give a JSON file, "
         "e.g. best.json"
     )
+
+
+def test_param_names_are_spelled_alike_in_sweeps_and_maps(tmp_path: Path):
+    from app.cmd_sweep import spec_from_args
+
+    # one spelling rule: spaces dropped, dashes as underscores, any case
+    assert parameter_name(" Integration-Radius ") == "integration_radius"
+    spellings = ["Integration-Radius=0.2", " huber-scale =0.3", "GATE_HEADING=0.5"]
+    args = build_parser().parse_args(["serve"] + [f"--param={p}" for p in spellings])
+    assert map_changes_from_args(args) == {
+        "integration_radius": 0.2,
+        "huber_scale": 0.3,
+        "gate_heading": 0.5,
+    }
+    sweep_args = ["sweep", "--out", str(tmp_path)] + [f"--param={p},0.1" for p in spellings]
+    spec = spec_from_args(build_parser().parse_args(sweep_args))
+    assert spec.swept == ("huber_scale", "integration_radius", "gate_heading")
+    # the messages each command had: run/serve name every unknown name, sweep the known ones
+    args = build_parser().parse_args(["serve", "--param", "Gamma=1", "--param", "DELTA=4"])
+    with pytest.raises(ParameterError, match="use --delta instead"):
+        map_changes_from_args(args)
+    args = build_parser().parse_args(["serve", "--param", "Gamma=1"])
+    with pytest.raises(ParameterError, match=r"unknown map parameter\(s\) \['gamma'\]"):
+        map_changes_from_args(args)
 
 
 @pytest.mark.parametrize(
