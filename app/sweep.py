@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 
 from app.params_file import BEST_FORMAT
-from app.plots import BLACK, FONT, Panel
+from app.plots import BLACK, FONT, Panel, save_png
 from app.progress import ProgressBar
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import MapMode
@@ -1209,10 +1209,7 @@ class Sweep:
         write_json(self.out_dir / BEST_FILE, best)
         self.files.append(self.out_dir / BEST_FILE)
         image = pareto_figure(best, list(setting_figures.values()), self._title(len(failed)))
-        ok, png = cv2.imencode(".png", image)
-        if not ok:  # pragma: no cover - OpenCV always encodes a uint8 image
-            raise SweepError("could not encode pareto.png")
-        write_bytes_atomic(self.out_dir / PARETO_FILE, png.tobytes())
+        save_png(image, self.out_dir / PARETO_FILE)
         self.files.append(self.out_dir / PARETO_FILE)
         result = SweepResult(
             self.out_dir, len(self.cells), computed, skipped, len(failed), best, list(self.files)

@@ -4,6 +4,7 @@ Dask engine (interrupted part-way and resumed), the ``cogmap sweep`` command and
 from __future__ import annotations
 
 import csv
+import errno
 import json
 import math
 from pathlib import Path
@@ -251,6 +252,27 @@ def test_results_table_round_trips_and_survives_a_cut_line(tmp_path: Path):
     other.write_text("a,b\n1,2\n")
     with pytest.raises(SweepError, match="its columns are not this cogmap's sweep table"):
         ResultsTable(other)
+
+
+def test_figures_are_written_atomically(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    # pareto.png (and cogmap run's figures) go through app.plots.save_png
+    import os
+
+    from app.plots import save_png
+
+    target = tmp_path / "pareto.png"
+    save_png(np.zeros((4, 6, 3), np.uint8), target)
+    assert target.read_bytes()[:4] == b"\x89PNG"
+    target.write_bytes(b"the previous figure")
+
+    def full_disk(fd: int) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full_disk)
+    with pytest.raises(OSError, match="No space left on device"):
+        save_png(np.zeros((4, 6, 3), np.uint8), target)
+    assert target.read_bytes() == b"the previous figure"
+    assert list(tmp_path.iterdir()) == [target]  # no partial file left behind
 
 
 # --------------------------------------------------------------------------- the engine
