@@ -21,24 +21,39 @@ from cogmap_core.sources.detect import (
     resolve_format,
 )
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS, LogSourceConfig
+from cogmap_core.sweep import normalise_parameter_name
 
 
-def add_topic_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--image-topic``, ``--odom-topic``, ``--gt-topic``, ``--no-ground-truth``."""
+def add_topic_arguments(
+    parser: argparse.ArgumentParser, ground_truth_optional: bool = True
+) -> None:
+    """``--image-topic``, ``--odom-topic``, ``--gt-topic`` and ``--no-ground-truth``.
+
+    Args:
+        parser: the command's parser.
+        ground_truth_optional: offer ``--no-ground-truth``; ``False`` for a command that always
+            needs the ground truth (``cogmap sweep``), whose parser then rejects the option as
+            unrecognized.
+
+    """
     parser.add_argument("--image-topic", default=IMAGE_TOPIC, help=f"(default {IMAGE_TOPIC})")
     parser.add_argument("--odom-topic", default=ODOMETRY_TOPIC, help=f"(default {ODOMETRY_TOPIC})")
     parser.add_argument(
         "--gt-topic", default=GROUND_TRUTH_TOPIC, help=f"(default {GROUND_TRUTH_TOPIC})"
     )
-    parser.add_argument("--no-ground-truth", action="store_true", help="ignore the ground truth")
+    if ground_truth_optional:
+        parser.add_argument(
+            "--no-ground-truth", action="store_true", help="ignore the ground truth"
+        )
 
 
 def topics_from_args(args: argparse.Namespace) -> BagTopics:
-    """The topics chosen on the command line."""
+    """The topics chosen on the command line (no ``--no-ground-truth``: the ground truth's)."""
+    ignore_ground_truth = getattr(args, "no_ground_truth", False)
     return BagTopics(
         image=args.image_topic,
         odometry=args.odom_topic,
-        ground_truth=None if args.no_ground_truth else args.gt_topic,
+        ground_truth=None if ignore_ground_truth else args.gt_topic,
     )
 
 
@@ -96,7 +111,9 @@ def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
     """The map parameters given on the command line (name -> value), validated.
 
     Every parameter a ``--params`` file names (a sweep's best.json names all), then the flags and
-    ``--param`` values over it.
+    ``--param`` values over it. ``--param`` names are spelled as in sweep specs
+    (:func:`~cogmap_core.sweep.normalise_parameter_name`: ``huber-scale`` is ``huber_scale``);
+    unknown ones are reported together by :meth:`MapParams.with_changes`.
     """
     file = getattr(args, "params_file", None)
     changes: dict[str, float] = load_params_changes(file) if file else {}
@@ -106,8 +123,8 @@ def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
         if getattr(args, name, None) is not None
     }
     for item in getattr(args, "param", []) or []:
-        name, sep, text = item.partition("=")
-        name = name.strip().replace("-", "_")
+        written_name, sep, text = item.partition("=")
+        name = normalise_parameter_name(written_name)
         if not sep or not name:
             raise ParameterError(f"--param {item!r}: expected NAME=VALUE, e.g. huber_scale=0.2")
         if name in _PAPER_FLAGS:

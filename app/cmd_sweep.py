@@ -143,10 +143,6 @@ def _say(text: str) -> None:
 def _sweep(args: argparse.Namespace) -> int:
     spec = spec_from_args(args)  # validate before any work
     options = _options(args, spec)
-    if args.no_ground_truth:
-        raise ParameterError(
-            "a sweep measures every map against the ground truth; drop --no-ground-truth"
-        )
     topics = topics_from_args(args)
     frontend_from_args(args, Path("-"))  # validate --frontend overrides now
     paths = [resolve_bag(b, logs=False) for b in args.bags] if args.bags else [resolve_bag(None)]
@@ -333,5 +329,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="seconds to reach the scheduler and find workers (default 10)",
     )
     add_frontend_arguments(parser)
-    add_topic_arguments(parser)
+    # no --no-ground-truth: a sweep measures every map against the ground truth
+    add_topic_arguments(parser, ground_truth_optional=False)
     parser.set_defaults(func=_sweep)

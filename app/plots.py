@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import EdgeKind, MapSnapshot
+from cogmap_core.fileio import write_bytes_atomic
 
 Color = tuple[int, int, int]  # BGR
 WHITE: Color = (255, 255, 255)
@@ -192,8 +193,18 @@ def map_figure(
 
 
 def save_png(image: NDArray[np.uint8], path: Path) -> None:
-    """Write a PNG (raises OSError on failure, e.g. a full disk, with the system's reason)."""
+    """Write a PNG atomically (:func:`~cogmap_core.fileio.write_bytes_atomic`).
+
+    A reader never sees a half-written file, and a failed write leaves an existing ``path`` as
+    it was.
+
+    Raises:
+        OSError: the file cannot be written (e.g. a full disk), with the system's reason.
+        ValueError: OpenCV cannot encode the image.
+
+    """
+    path = Path(path)
     ok, data = cv2.imencode(".png", image)
     if not ok:
         raise ValueError(f"could not encode {path.name} as PNG")
-    Path(path).write_bytes(data.tobytes())
+    write_bytes_atomic(path, data.tobytes())

@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 
 from app.params_file import BEST_FORMAT
-from app.plots import BLACK, FONT, Panel
+from app.plots import BLACK, FONT, Panel, save_png
 from app.progress import ProgressBar
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import MapMode
@@ -199,7 +199,9 @@ class BagEvents:
         duration_s: data duration.
         events: number of events.
         dead_reckoning_ate_m: ATE of the odometry alone (the baseline).
-        origin: where the events came from this time: ``front end``, ``cache`` or ``folder``.
+        origin: where the events came from this time: ``front end``, ``cache``, ``folder``,
+            ``event file``, or ``manifest`` (not loaded: the figures of the bag's record in
+            ``sweep.json``, see :meth:`from_manifest_record`).
 
     """
 
@@ -224,6 +226,66 @@ class BagEvents:
             "dead_reckoning_ate_m": self.dead_reckoning_ate_m,
             "frontend": None if self.source.frontend is None else self.source.frontend.to_dict(),
         }
+
+    @classmethod
+    def from_manifest_record(
+        cls, source: BagSource, out_dir: Path, record: Mapping[str, Any]
+    ) -> BagEvents | None:
+        """The bag's figures as an earlier run recorded them in ``sweep.json``, events unread.
+
+        For a sweep with nothing left to compute, whose analysis needs only these figures.
+
+        Args:
+            source: the bag.
+            out_dir: the sweep folder.
+            record: the bag's entry in ``sweep.json``'s ``bags`` (see :meth:`to_dict`).
+
+        Returns:
+            The figures (``origin`` ``"manifest"``), or ``None`` when the record is not of these
+            events, lacks a figure (an older or cut-short manifest) or its event file is gone:
+            then the events must be loaded (:func:`prepare_events`).
+
+        """
+        events_path = out_dir / EVENTS_DIR / source.events_name
+        figures = ("frames", "duration_s", "events", "dead_reckoning_ate_m")
+        if record.get("key") != source.key or any(name not in record for name in figures):
+            return None
+        if not events_path.is_file():
+            return None
+        dead_reckoning = record["dead_reckoning_ate_m"]  # None: NaN, written as strict JSON
+        try:
+            return cls(
+                source=source,
+                events_path=events_path,
+                frames=int(record["frames"]),
+                duration_s=float(record["duration_s"]),
+                events=int(record["events"]),
+                dead_reckoning_ate_m=float("nan")
+                if dead_reckoning is None
+                else float(dead_reckoning),
+                origin="manifest",
+            )
+        except (TypeError, ValueError):  # a hand-edited record: load the events instead
+            return None
+
+
+def manifest_bag_records(path: Path) -> dict[str, dict[str, Any]]:
+    """The per-bag records of a sweep's ``sweep.json``, by bag key (``{}`` if there are none).
+
+    A missing or unreadable manifest, or one without bag records, gives ``{}``.
+    """
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    bags = manifest.get("bags") if isinstance(manifest, dict) else None
+    if not isinstance(bags, list):
+        return {}
+    return {
+        str(record["key"]): record
+        for record in bags
+        if isinstance(record, dict) and "key" in record
+    }
 
 
 def shared_events_dir() -> Path:
@@ -946,12 +1008,15 @@ class Sweep:
         self.cells = plan_cells(self.bags, self._all_settings, options.mode)
         self.digest = cells_digest(self.cells)
         self.events: dict[str, BagEvents] = {}
+        self._manifest_bags: dict[str, dict[str, Any]] = {}  # the folder's records, by bag key
         self.files: list[Path] = []
 
     # ------------------------------------------------------------------ steps
     def run(self) -> SweepResult:
         """Run the sweep (resuming a folder of the same sweep); return what it produced."""
         with self._locked_folder():
+            # read before the first write replaces them: a finished sweep reuses its figures
+            self._manifest_bags = manifest_bag_records(self.out_dir / MANIFEST_FILE)
             self._write_manifest("running")
             connection: DaskConnection | None = None
             try:
@@ -963,7 +1028,7 @@ class Sweep:
                     connection = connect_remote(
                         self.options.scheduler, self.options.connect_timeout
                     )
-                self._record_events()
+                self._record_events(every_cell_done=not todo)
                 if todo and client is None:
                     if connection is None:
                         connection = connect_local(self.options.workers, self.options.processes)
@@ -1051,12 +1116,7 @@ class Sweep:
             "cells": len(self.cells),
             "layout_radius_m": LAYOUT_RADIUS,
             "size_change_window": f"last {GROWTH_FRACTION:g} of the data",
-            "bags": [
-                self.events[b.key].to_dict()
-                if b.key in self.events
-                else {"bag": str(b.path), "label": b.label, "key": b.key}
-                for b in self.bags
-            ],
+            "bags": [self._bag_record(b) for b in self.bags],
         }
 
     def _write_manifest(self, status: str, message: str = "") -> None:
@@ -1065,15 +1125,36 @@ class Sweep:
         if path not in self.files:
             self.files.append(path)
 
-    def _record_events(self) -> None:
+    def _bag_record(self, bag: BagSource) -> dict[str, Any]:
+        """A bag's entry in ``sweep.json``: its figures once known (this run's or the folder's)."""
+        if bag.key in self.events:
+            return self.events[bag.key].to_dict()
+        earlier = self._manifest_bags.get(bag.key)
+        if earlier is not None:  # kept until this run knows them (e.g. it fails before)
+            return earlier
+        return {"bag": str(bag.path), "label": bag.label, "key": bag.key}
+
+    def _record_events(self, every_cell_done: bool = False) -> None:
+        """Each bag's events and figures (:class:`BagEvents`), then the manifest with them.
+
+        ``every_cell_done``: nothing is left to compute, so a bag whose figures the folder's
+        ``sweep.json`` holds is not loaded at all (an older manifest without them: it is).
+        """
         for bag in self.bags:
-            events = prepare_events(bag, self.out_dir, self.frame_progress, self.say)
+            events = None
+            if every_cell_done and bag.key in self._manifest_bags:
+                events = BagEvents.from_manifest_record(
+                    bag, self.out_dir, self._manifest_bags[bag.key]
+                )
+            if events is None:
+                events = prepare_events(bag, self.out_dir, self.frame_progress, self.say)
             self.events[bag.key] = events
             note = {
                 "front end": "front end run, events saved",
                 "cache": "events from the cache",
                 "folder": "events from the sweep folder",
                 "event file": "recorded event file",
+                "manifest": "every cell done, events not loaded",
             }[events.origin]
             self.say(
                 f"{bag.label}: {events.frames} frames, {events.duration_s:.0f} s of data, "
@@ -1128,10 +1209,7 @@ class Sweep:
         write_json(self.out_dir / BEST_FILE, best)
         self.files.append(self.out_dir / BEST_FILE)
         image = pareto_figure(best, list(setting_figures.values()), self._title(len(failed)))
-        ok, png = cv2.imencode(".png", image)
-        if not ok:  # pragma: no cover - OpenCV always encodes a uint8 image
-            raise SweepError("could not encode pareto.png")
-        write_bytes_atomic(self.out_dir / PARETO_FILE, png.tobytes())
+        save_png(image, self.out_dir / PARETO_FILE)
         self.files.append(self.out_dir / PARETO_FILE)
         result = SweepResult(
             self.out_dir, len(self.cells), computed, skipped, len(failed), best, list(self.files)

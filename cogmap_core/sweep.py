@@ -85,14 +85,25 @@ TIMING_COLUMNS: tuple[str, ...] = ("optimize_wall_s", "build_wall_s", "evaluate_
 """Wall times of one cell (the only figures that differ between runs)."""
 
 
+def normalise_parameter_name(text: str) -> str:
+    """A map parameter's name as a user wrote it, in :class:`MapParams` spelling (unchecked).
+
+    Surrounding spaces are dropped, dashes become underscores and letters lower case:
+    ``t-interval``, ``T_Interval`` and ``t_interval`` (spaces around it or not) are all
+    ``t_interval``. The one spelling rule of sweep specs (:func:`parameter_name`) and of
+    ``--param NAME=VALUE``.
+    """
+    return text.strip().replace("-", "_").lower()
+
+
 def parameter_name(text: str) -> str:
-    """The :class:`MapParams` field a user wrote (``t-interval`` and ``t_interval`` alike).
+    """The :class:`MapParams` field a user wrote (see :func:`normalise_parameter_name`).
 
     Raises:
         ParameterError: not a map parameter (the message lists the known ones).
 
     """
-    name = text.strip().replace("-", "_").lower()
+    name = normalise_parameter_name(text)
     if name not in PARAMETER_NAMES:
         raise ParameterError(f"unknown map parameter {text!r}; known: {', '.join(PARAMETER_NAMES)}")
     return name

@@ -4,6 +4,7 @@ Dask engine (interrupted part-way and resumed), the ``cogmap sweep`` command and
 from __future__ import annotations
 
 import csv
+import errno
 import json
 import math
 from pathlib import Path
@@ -40,6 +41,7 @@ from cogmap_core.sweep import (
     evaluate_cell,
     front_ate,
     front_completeness,
+    parameter_name,
     pareto_mask,
     parse_parameter,
     smallest_complete,
@@ -252,6 +254,27 @@ def test_results_table_round_trips_and_survives_a_cut_line(tmp_path: Path):
         ResultsTable(other)
 
 
+def test_figures_are_written_atomically(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    # pareto.png (and cogmap run's figures) go through app.plots.save_png
+    import os
+
+    from app.plots import save_png
+
+    target = tmp_path / "pareto.png"
+    save_png(np.zeros((4, 6, 3), np.uint8), target)
+    assert target.read_bytes()[:4] == b"\x89PNG"
+    target.write_bytes(b"the previous figure")
+
+    def full_disk(fd: int) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full_disk)
+    with pytest.raises(OSError, match="No space left on device"):
+        save_png(np.zeros((4, 6, 3), np.uint8), target)
+    assert target.read_bytes() == b"the previous figure"
+    assert list(tmp_path.iterdir()) == [target]  # no partial file left behind
+
+
 # --------------------------------------------------------------------------- the engine
 GRID = {"delta": "2,3.746,6,8", "t_interval": "0.5,2"}  # 8 settings, the paper's among them
 
@@ -381,6 +404,50 @@ def test_a_failing_cell_is_recorded_and_the_sweep_goes_on(tmp_path: Path, in_pro
     assert json.loads((out / "sweep.json").read_text())["status"] == "incomplete"
 
 
+def test_a_finished_sweep_resumes_without_loading_the_events(
+    tmp_path: Path, in_process_client, monkeypatch: pytest.MonkeyPatch
+):
+    import app.sweep
+
+    source = bag_source(RECORDED, None, BagTopics())
+    options = SweepOptions(spec=sweep_spec({"delta": "3,6"}))
+    out = tmp_path / "sweep"
+    assert Sweep([source], out, options, client=in_process_client).run().computed == 3
+    results, best = (out / "results.csv").read_bytes(), (out / "best.json").read_bytes()
+    (record,) = json.loads((out / "sweep.json").read_text())["bags"]
+    expected_ate = EventLog.from_recording(load_event_file(RECORDED)).dead_reckoning_ate()
+    assert record["dead_reckoning_ate_m"] == expected_ate
+
+    def refuse(path: Path) -> None:
+        raise AssertionError(f"a finished sweep loaded {path}")
+
+    monkeypatch.setattr(app.sweep, "load_event_file", refuse)
+    said: list[str] = []
+    again = Sweep([source], out, options, say=said.append).run()  # no cluster needed either
+    assert (again.computed, again.skipped, again.failed) == (0, 3, 0)
+    assert (out / "results.csv").read_bytes() == results
+    assert (out / "best.json").read_bytes() == best
+    manifest = json.loads((out / "sweep.json").read_text())
+    assert manifest["status"] == "complete" and manifest["bags"] == [record]
+    assert any("every cell done, events not loaded" in line for line in said)
+
+    # a manifest without the figure (older, or cut short): the events are loaded, it is computed
+    manifest["bags"] = [{k: v for k, v in record.items() if k != "dead_reckoning_ate_m"}]
+    (out / "sweep.json").write_text(json.dumps(manifest))
+    loaded: list[Path] = []
+
+    def counting(path: Path) -> object:
+        loaded.append(Path(path))
+        return load_event_file(path)
+
+    monkeypatch.setattr(app.sweep, "load_event_file", counting)
+    assert Sweep([source], out, options).run().computed == 0
+    assert loaded == [out / "events" / source.events_name]
+    assert json.loads((out / "sweep.json").read_text())["bags"] == [record]
+    assert (out / "results.csv").read_bytes() == results
+    assert (out / "best.json").read_bytes() == best
+
+
 def test_workers_can_read_the_events_from_the_folder(tmp_path: Path, in_process_client):
     from app.sweep import check_worker_paths
 
@@ -491,6 +558,30 @@ def test_params_files(tmp_path: Path, capsys):
     )
 
 
+def test_param_names_are_spelled_alike_in_sweeps_and_maps(tmp_path: Path):
+    from app.cmd_sweep import spec_from_args
+
+    # one spelling rule: spaces dropped, dashes as underscores, any case
+    assert parameter_name(" Integration-Radius ") == "integration_radius"
+    spellings = ["Integration-Radius=0.2", " huber-scale =0.3", "GATE_HEADING=0.5"]
+    args = build_parser().parse_args(["serve"] + [f"--param={p}" for p in spellings])
+    assert map_changes_from_args(args) == {
+        "integration_radius": 0.2,
+        "huber_scale": 0.3,
+        "gate_heading": 0.5,
+    }
+    sweep_args = ["sweep", "--out", str(tmp_path)] + [f"--param={p},0.1" for p in spellings]
+    spec = spec_from_args(build_parser().parse_args(sweep_args))
+    assert spec.swept == ("huber_scale", "integration_radius", "gate_heading")
+    # the messages each command had: run/serve name every unknown name, sweep the known ones
+    args = build_parser().parse_args(["serve", "--param", "Gamma=1", "--param", "DELTA=4"])
+    with pytest.raises(ParameterError, match="use --delta instead"):
+        map_changes_from_args(args)
+    args = build_parser().parse_args(["serve", "--param", "Gamma=1"])
+    with pytest.raises(ParameterError, match=r"unknown map parameter\(s\) \['gamma'\]"):
+        map_changes_from_args(args)
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
@@ -500,7 +591,6 @@ def test_params_files(tmp_path: Path, capsys):
         (["--delta", "2,3", "--param", "delta=4,5"], "delta is given twice"),
         (["--delta", "2:8:3", "--samples", "0"], "samples 0: give a whole number >= 1"),
         (["--delta", "2,3", "--workers", "0"], "--workers 0: give at least 1"),
-        (["--delta", "2,3", "--no-ground-truth"], "drop --no-ground-truth"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(extra, message, tmp_path: Path, capsys):
@@ -509,6 +599,24 @@ def test_bad_input_is_one_line_and_exit_2(extra, message, tmp_path: Path, capsys
     line = _error_line(capsys)
     assert line.startswith("cogmap sweep: error: ") and message in line
     assert not out.exists()  # rejected before anything is written
+
+
+def test_sweep_does_not_offer_no_ground_truth(tmp_path: Path, capsys):
+    # a sweep measures every map against the ground truth: its parser has no such option, so
+    # argparse rejects it as unrecognized (run and serve keep it)
+    with pytest.raises(SystemExit) as info:
+        main(["sweep", "--help"])
+    assert info.value.code == 0
+    sweep_help = capsys.readouterr().out
+    assert "--gt-topic" in sweep_help and "--no-ground-truth" not in sweep_help
+    for command in (["run", "--out", str(tmp_path / "run")], ["serve"]):
+        assert build_parser().parse_args([*command, "--no-ground-truth"]).no_ground_truth
+    out = tmp_path / "sweep"
+    with pytest.raises(SystemExit) as info:
+        main(["sweep", str(RECORDED), "--out", str(out), "--delta", "2,3", "--no-ground-truth"])
+    assert info.value.code == 2
+    assert _error_line(capsys) == "cogmap: error: unrecognized arguments: --no-ground-truth"
+    assert not out.exists()
 
 
 @pytest.mark.parametrize(
