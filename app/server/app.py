@@ -20,7 +20,6 @@ from __future__ import annotations
 import html
 import logging
 import math
-import re
 import threading
 import time
 import traceback
@@ -64,7 +63,17 @@ from app.server.params import (
 from app.server.rebuild import make_builder
 from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
 from app.server.scene import MapExtras, SceneStreamer, cluster_color
-from app.server.validation import Adjusted, GuiGate, Refused, choice, click, number, text
+from app.server.validation import (
+    Adjusted,
+    Adjustment,
+    GuiGate,
+    Refusal,
+    Refused,
+    choice,
+    click,
+    number,
+    text,
+)
 from app.server.view import ClientView, Pick, nearest_pick, swatch
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams
@@ -116,8 +125,8 @@ def recent_links(log: EventLog, frames: int, count: int) -> list[tuple[float, in
     ]
 
 
-def _log_refusal(message: str) -> None:
-    log.warning("GUI value from a client %s", message)
+def _log_refusal(note: Refusal | Adjustment) -> None:
+    log.warning("GUI value from a client %s", note.message)
 
 
 class _RateLimit:
@@ -423,7 +432,7 @@ class CogmapApp:
             gate.guard(
                 self.param_boxes[spec.name],
                 self._box_check(spec),
-                label=f"{spec.label} box",
+                label=spec.label,
                 note=self._param_note,
             )
         gate.guard(self.replay_path, text())
@@ -585,8 +594,8 @@ class CogmapApp:
 
         return check
 
-    def _seek_note(self, message: str) -> None:
-        self.status_note = message
+    def _seek_note(self, note: Refusal | Adjustment) -> None:
+        self.status_note = note.message
         self._update_status(force=True)
 
     def _on_seek_box(self) -> None:
@@ -604,15 +613,18 @@ class CogmapApp:
         cls = "cogmap-note cogmap-error" if error else "cogmap-note"
         return f'<div class="{cls}" id="cogmap-params-message">{html.escape(text)}</div>'
 
-    def _param_note(self, message: str) -> None:
-        error = message.startswith("refused")
-        # the gate's "refused δ box: 'abc' is not a number; kept '3.746'" reads better as
-        # "refused δ: 'abc' is not a number; δ stays 3.746"
-        found = re.fullmatch(r"refused (.+?)(?: box)?: (.*); kept '?(.*?)'?", message)
-        if found is not None:
-            label, reason, kept = found.groups()
-            message = f"refused {label}: {reason}; {label} stays {kept}"
-        self.params_md.content = self._params_message(message, error)
+    def _param_note(self, note: Refusal | Adjustment) -> None:
+        """Show what the gate did with a parameter's value.
+
+        A refusal reads ``refused δ: 'abc' is not a number; δ stays 3.746``.
+        """
+        if isinstance(note, Adjustment):
+            self.params_md.content = self._params_message(note.message)
+            return
+        kept = note.kept if isinstance(note.kept, str) else repr(note.kept)
+        self.params_md.content = self._params_message(
+            f"refused {note.label}: {note.reason}; {note.label} stays {kept}", error=True
+        )
 
     def _set_quietly(self, handle: Any, value: Any) -> None:
         self._setting.params = True
@@ -690,7 +702,7 @@ class CogmapApp:
             value = self._box_check(spec)(typed)
         except Refused as exc:
             current = getattr(self.replay.params, spec.name)
-            self._param_note(f"refused {spec.label} box: {exc}; kept {format_value(current)!r}")
+            self._param_note(Refusal(spec.label, str(exc), format_value(current)))
             return
         message = None
         if isinstance(value, Adjusted):
@@ -700,7 +712,7 @@ class CogmapApp:
         else:
             box.value = value
         if message is not None and self._typed.pop(spec.name, None) is not None:
-            self._param_note(message)  # (the box's callback did not run)
+            self.params_md.content = self._params_message(message)  # (no callback ran)
 
     def current_slider_params(self) -> MapParams:
         """The parameters the controls show, each clamped into its slider's range.
