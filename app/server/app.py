@@ -44,6 +44,7 @@ from app.server.figures import (
     FigureInputs,
     MapFigures,
     compute_figures,
+    false_link_inputs,
     false_link_times,
     figure_inputs,
     layout_radius_label,
@@ -861,9 +862,12 @@ class CogmapApp:
     def _compute_figures(self, modes: list[MapMode]) -> None:
         """Compute the figures of ``modes`` that changed, holding the replay lock only to copy.
 
-        The computation (some 30 ms per map) runs without the lock, so playback and rebuilds
-        do not wait for it; figures of a replay that was swapped for another bag meanwhile, or
-        of a map that changed meanwhile, are dropped (the next round computes them again).
+        The inputs (the maps' snapshots, a copy of the log for the false links) are taken under
+        the lock; the computation (some 30 ms per map) runs without it, so playback and rebuilds
+        do not wait for it. The results are stored and the scene republished under the lock
+        (a paused replay publishes nothing else); the views then refresh, each taking the lock
+        for what it reads. Figures of a replay that was swapped for another bag meanwhile are
+        dropped; those of a map that changed meanwhile are computed again next round.
         """
         replay = self.replay
         todo: list[tuple[MapMode, tuple[int, ...], FigureInputs]] = []
@@ -872,38 +876,35 @@ class CogmapApp:
                 return
             log_ = replay.session.log
             judging = replay.session.evaluation
-            key = (id(log_), log_.frames)
-            changed = key != self._false_key
-            if changed:
-                self._false_key = key
-                self._false_times = false_link_times(log_, judging)
+            false_key = (id(log_), log_.frames)
+            false_inputs = false_link_inputs(log_) if false_key != self._false_key else None
             for mode in modes:
                 cmap = replay.session.maps[mode]
                 mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
                         log_.frames)  # fmt: skip
                 if self._figures_key.get(mode) != mkey:
                     todo.append((mode, mkey, figure_inputs(log_, cmap)))
-        for mode, mkey, inputs in todo:
-            figures = compute_figures(inputs, judging)
-            with replay.lock, self.scene_lock:
-                if replay is not self.replay:
-                    return
-                self._figures_key[mode] = mkey
-                self._figures[mode] = figures
-                self.stats_version += 1
-            changed = True
-        if not changed:
+        false_times = None if false_inputs is None else false_link_times(false_inputs, judging)
+        computed = [(mode, mkey, compute_figures(inputs, judging)) for mode, mkey, inputs in todo]
+        if false_times is None and not computed:
             return
         with replay.lock, self.scene_lock:
             if replay is not self.replay:
                 return
+            if false_times is not None:
+                self._false_key = false_key
+                self._false_times = false_times
+            for mode, mkey, figures in computed:
+                self._figures_key[mode] = mkey
+                self._figures[mode] = figures
+                self.stats_version += 1
             self._publish_scene()  # the truth's alignment, the false loop closures
             self._update_counters()
-            for view in list(self.views.values()):
-                try:
-                    view.refresh()
-                except Exception:
-                    traceback.print_exc()
+        for view in list(self.views.values()):
+            try:
+                view.refresh()
+            except Exception:
+                traceback.print_exc()
 
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log
