@@ -21,12 +21,19 @@ from app.server.scene import (
     StreamStats,
     _lab,
     cluster_color,
+    edge_error,
     edge_errors,
 )
+from app.server.view import describe_edge
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry
+from cogmap_core.slam import SlamSession
+from tests import test_server_support as support
 from tests.test_server_support import make_server
+
+short_bag = support.short_bag
+reference = support.reference
 
 
 class FakeNode:
@@ -239,3 +246,24 @@ def test_false_loop_closures_truth_alignment_and_vertex_size(server: viser.Viser
     streamer.show((MapMode.COMPACT,))
     streamer.publish({MapMode.COMPACT: sparse})
     assert streamer.layers[MapMode.COMPACT].point_size == 0.03
+
+
+def test_one_edges_residual_is_the_whole_graphs_to_the_last_bit(
+    reference: SlamSession, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    identity = CognitiveMap(MapMode.STANDARD, MapParams(edge_noise_model=0.0))
+    identity.apply_all(circle_events(300, laps=2))
+    identity.finish()  # optimised: the residuals are not all zero
+    maps = [*reference.maps.maps.values(), identity]
+    expected = [(cmap, cmap.snapshot(), edge_errors(cmap)) for cmap in maps]
+    assert identity.params.link_sigmas() is None and reference.params.link_sigmas() is not None
+    assert max(float(errors.max()) for _, _, errors in expected) > 0.05  # not all near zero
+    monkeypatch.setattr(CognitiveMap, "to_pose_graph", None)  # one edge needs no pose graph
+    for cmap, snap, errors in expected:
+        assert errors.shape[0] == snap.edge_from.shape[0] and np.any(errors > 0)
+        sigmas = cmap.params.link_sigmas()
+        for k in range(errors.shape[0]):
+            assert edge_error(snap, k, sigmas) == errors[k]
+        for k in (0, int(np.argmax(errors)), errors.shape[0] - 1):
+            text = describe_edge(cmap, snap, k, np.zeros(0))
+            assert f"<td>residual</td><td>{errors[k]:.2f} σ (whitened" in text

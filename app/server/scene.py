@@ -39,6 +39,8 @@ import viser
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
+from cogmap_core.edge_noise import edge_information
+from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.optimizer import EdgeModel, edge_terms
 
 FloatArray = NDArray[np.float64]
@@ -192,9 +194,35 @@ def edge_errors(cmap: CognitiveMap) -> FloatArray:
     graph = cmap.to_pose_graph()
     if graph.num_edges == 0:
         return np.zeros(0)
-    model = EdgeModel(graph.measurements, graph.information)
     x = graph.poses
-    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, None, False)
+    return _whitened_norms(
+        x[graph.edge_from], x[graph.edge_to], graph.measurements, graph.information
+    )
+
+
+def edge_error(snap: MapSnapshot, index: int, link_sigmas: tuple[float, float] | None) -> float:
+    """The norm of edge ``index``'s whitened residual: :func:`edge_errors` of that edge alone.
+
+    Computed from the edge's two vertex poses, its measurement and its information (with the
+    map's ``link_sigmas``, :meth:`~cogmap_core.config.MapParams.link_sigmas`), not from the
+    whole pose graph.
+    """
+    edge = slice(index, index + 1)
+    first, second = np.searchsorted(snap.vertex_ids, (snap.edge_from[index], snap.edge_to[index]))
+    measurement = snap.edge_rel[edge]
+    information = edge_information(snap.edge_kind[edge], measurement, link_sigmas)
+    norms = _whitened_norms(
+        snap.poses[first : first + 1], snap.poses[second : second + 1], measurement, information
+    )
+    return float(norms[0])
+
+
+def _whitened_norms(
+    pose_from: FloatArray, pose_to: FloatArray, measurements: FloatArray, information: FloatArray
+) -> FloatArray:
+    """Per edge, ``‖S r‖``: the norm of the residual whitened by its information."""
+    model = EdgeModel(measurements, information)
+    res, _ = edge_terms(pose_from, pose_to, model, None, False)
     return np.sqrt(np.einsum("ka,ka->k", res, res))
 
 

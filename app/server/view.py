@@ -45,7 +45,7 @@ from app.server.scene import (
     SEQUENTIAL_COLOR,
     TIME_RAMP_CSS,
     cluster_color,
-    edge_errors,
+    edge_error,
 )
 from app.server.validation import GuiGate, boolean, choice, click
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
@@ -711,8 +711,7 @@ def describe_edge(
     """What the page says about edge ``index`` of ``snap`` (with its residual)."""
     kind = "loop closure" if snap.edge_kind[index] == EdgeKind.LOOP_CLOSURE else "sequential"
     dx, dy, dtheta = snap.edge_rel[index]
-    errors = edge_errors(cmap)
-    residual = float(errors[index]) if index < errors.shape[0] else math.nan
+    residual = edge_error(snap, index, cmap.params.link_sigmas())
     rows = [
         ("map", cmap.mode.value),
         ("edge", f"{int(snap.edge_from[index])} → {int(snap.edge_to[index])} ({kind})"),
