@@ -11,9 +11,11 @@ import viser
 from app.server.scene import (
     CHUNK,
     FALSE_LOOP_COLOR,
+    LOOP_Z,
     MAP_COLORS,
     ROBOT_COLOR,
     SEQUENTIAL_COLOR,
+    SEQUENTIAL_Z,
     ChunkedNodes,
     MapExtras,
     MapLayer,
@@ -23,6 +25,7 @@ from app.server.scene import (
     cluster_color,
     edge_error,
     edge_errors,
+    edge_segments,
 )
 from app.server.view import describe_edge
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
@@ -267,3 +270,27 @@ def test_one_edges_residual_is_the_whole_graphs_to_the_last_bit(
         for k in (0, int(np.argmax(errors)), errors.shape[0] - 1):
             text = describe_edge(cmap, snap, k, np.zeros(0))
             assert f"<td>residual</td><td>{errors[k]:.2f} σ (whitened" in text
+
+
+def test_edge_segments_join_each_edges_vertices_at_its_height(server: viser.ViserServer) -> None:
+    cmap = CognitiveMap(MapMode.STANDARD)
+    cmap.apply_all(circle_events(300, laps=2))
+    cmap.finish()
+    snap = cmap.snapshot()
+    rows = {int(v): k for k, v in enumerate(snap.vertex_ids)}
+    flat = edge_segments(snap)
+    assert flat.shape == (cmap.num_edges, 2, 3) and flat.dtype == np.float32
+    for k, (a, b) in enumerate(zip(snap.edge_from.tolist(), snap.edge_to.tolist(), strict=True)):
+        expected = np.float32(snap.poses[[rows[a], rows[b]], :2])
+        np.testing.assert_array_equal(flat[k, :, :2], expected)
+    assert (flat[:, :, 2] == 0).all()
+    assert edge_segments(CognitiveMap(MapMode.STANDARD).snapshot(), 1.0).shape == (0, 2, 3)
+    # the layer draws the same segments, sequential and loop-closure edges at their heights
+    layer = MapLayer(server, MapMode.STANDARD, StreamStats())
+    layer.update(cmap)
+    is_loop = snap.edge_kind == 1
+    for name, chosen, z in (("sequential", ~is_loop, SEQUENTIAL_Z), ("loop", is_loop, LOOP_Z)):
+        drawn = layer.edges[f"{name}/cluster"].items()
+        assert drawn is not None
+        np.testing.assert_array_equal(drawn[:, :, :2], flat[chosen, :, :2])
+        assert (drawn[:, :, 2] == np.float32(z)).all()

@@ -355,6 +355,22 @@ def path_segments(poses: FloatArray, z: float) -> NDArray[np.float32]:
     return seg
 
 
+def edge_segments(snap: MapSnapshot, heights: float | FloatArray = 0.0) -> NDArray[np.float32]:
+    """The edges of ``snap`` as line segments ``(m, 2, 3)`` from the first vertex to the second.
+
+    ``heights``: the segments' z, one for all or one per edge.
+    """
+    m = snap.edge_from.shape[0]
+    segments = np.empty((m, 2, 3), dtype=np.float32)
+    if m:
+        first, second = snap.edge_ends()
+        segments[:, 0, :2] = snap.poses[first, :2]
+        segments[:, 1, :2] = snap.poses[second, :2]
+    z = np.asarray(heights)
+    segments[:, :, 2] = z[:, None] if z.ndim else z
+    return segments
+
+
 def robot_triangle(size: float) -> tuple[NDArray[np.float32], NDArray[np.int32]]:
     """A flat arrow-head pointing along +x (vertices, faces), both sides drawn."""
     v = np.array(
@@ -602,14 +618,8 @@ class MapLayer:
         points = np.empty((n, 3), dtype=np.float32)
         points[:, :2] = snap.poses[:, :2]
         points[:, 2] = VERTEX_Z
-        m = snap.edge_from.shape[0]
-        segments = np.empty((m, 2, 3), dtype=np.float32)
-        if m:
-            ends = snap.edge_ends()
-            segments[:, 0, :2] = snap.poses[ends[0], :2]
-            segments[:, 1, :2] = snap.poses[ends[1], :2]
         is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
-        segments[:, :, 2] = np.where(is_loop, LOOP_Z, SEQUENTIAL_Z)[:, None]
+        segments = edge_segments(snap, np.where(is_loop, LOOP_Z, SEQUENTIAL_Z))
         size = self._point_size(segments[~is_loop])
         resized = size != self.point_size
         self.point_size = size
