@@ -80,6 +80,28 @@ def test_chunked_nodes_send_only_changed_chunks() -> None:
     assert log == ["remove /x/c0000", "remove /x/c0001"] and nodes.num_items == 0
 
 
+def test_a_changed_chunk_is_updated_in_place_by_the_updater() -> None:
+    log: list[str] = []
+
+    def factory(name: str, part: np.ndarray, colors: np.ndarray | None) -> FakeNode:
+        log.append(f"send {name} {part.shape[0]}")
+        return FakeNode(log, name)
+
+    def updater(handle: FakeNode, part: np.ndarray, colors: np.ndarray | None) -> None:
+        log.append(f"update {handle.name} {part.shape[0]}")
+
+    nodes = ChunkedNodes("/x", factory, StreamStats(), chunk=4, updater=updater)  # type: ignore[arg-type]
+    items = np.arange(18, dtype=np.float32).reshape(6, 3)
+    assert nodes.sync(items) == 2
+    first = list(nodes._handles)
+    log.clear()
+    grown = np.concatenate([items, np.ones((1, 3), dtype=np.float32)])
+    assert nodes.sync(grown) == 1
+    assert log == ["update /x/c0001 3"]  # the node is kept, not made again
+    assert nodes._handles == first
+    np.testing.assert_array_equal(nodes.items(), grown)
+
+
 def circle_events(vertices: int, laps: int = 2, start: int = 0) -> list[MapEvent]:
     """A robot driving laps of a 14 m circle, a vertex every step (0.05 s apart); from the second
     lap on every 10th vertex closes a loop on the first lap's vertex at that place."""

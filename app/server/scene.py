@@ -244,8 +244,8 @@ class StreamStats:
 
 
 NodeFactory = Callable[[str, np.ndarray, np.ndarray | None], viser.SceneNodeHandle]
-#: Puts new content into an existing node (returns False when it cannot).
-NodeUpdater = Callable[[viser.SceneNodeHandle, np.ndarray, np.ndarray | None], bool]
+#: Puts new content (items, colours) into an existing node, in place.
+NodeUpdater = Callable[[viser.SceneNodeHandle, np.ndarray, np.ndarray | None], None]
 
 
 class ChunkedNodes:
@@ -316,10 +316,10 @@ class ChunkedNodes:
                     continue
             record = (part.copy(), None if cpart is None else cpart.copy())
             if c < len(self._handles):
-                handle = self._handles[c]
-                if self.updater is None or not self.updater(handle, part, cpart):
-                    handle = self.factory(f"{self.name}/c{c:04d}", part, cpart)
-                self._handles[c] = handle
+                if self.updater is None:
+                    self._handles[c] = self.factory(f"{self.name}/c{c:04d}", part, cpart)
+                else:
+                    self.updater(self._handles[c], part, cpart)
                 self._sent[c] = record
             else:
                 self._handles.append(self.factory(f"{self.name}/c{c:04d}", part, cpart))
@@ -467,7 +467,7 @@ class MapLayer:
 
             return make
 
-        def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> bool:
+        def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> None:
             with server.atomic():
                 handle.points = part
                 handle.colors = np.broadcast_to(
@@ -475,16 +475,14 @@ class MapLayer:
                 ).copy()
                 if handle.point_size != self.point_size:
                     handle.point_size = self.point_size
-            return True
 
         def move_segments(color: tuple[int, int, int] | None) -> NodeUpdater:
-            def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> bool:
+            def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> None:
                 if cols is None:
                     cols = np.broadcast_to(np.array(color, np.uint8), part.shape).copy()
                 with server.atomic():
                     handle.points = part
                     handle.colors = cols
-                return True
 
             return update
 
