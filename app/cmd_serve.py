@@ -24,7 +24,7 @@ from app.cli_common import (
     resolve_bag,
     topics_from_args,
 )
-from app.server.replay import BagSource, GenerationProgress
+from app.server.replay import BagSource, GenerationProgress, check_resumable
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.session_file import describe, resume_session
 from cogmap_core.sources.detect import KINDS, check_companions
@@ -84,11 +84,7 @@ def _serve(args: argparse.Namespace) -> int:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
     resume = None
     if args.resume is not None:
-        if not kind.has_camera:
-            raise ParameterError(
-                f"--resume: sessions are for bags; {args.bag} is a log of odometry and place "
-                f"recognition ({kind.name}): serve it without --resume"
-            )
+        check_resumable(args.bag, kind.name)  # before the session file is even read
         if args.bag is None:
             raise ParameterError(
                 "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"

@@ -11,6 +11,7 @@ import csv
 import html
 import io
 import json
+import threading
 import time
 import urllib.request
 from collections.abc import Callable
@@ -21,6 +22,8 @@ import numpy as np
 import pytest
 from websockets.sync.client import ClientConnection
 
+import app.server.app as app_module
+import app.server.view as view_module
 from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
 from app.server.export import g2o_bytes, save_html_replay, summary_dict, summary_inputs
 from app.server.figures import truth_transform
@@ -29,7 +32,7 @@ from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import profile_path
 from cogmap_core.g2o import read_g2o
-from cogmap_core.slam import SlamSession
+from cogmap_core.slam import ALL_MODES, SlamSession
 from tests import test_server_support as support
 from tests.test_server_support import (
     assert_same_map,
@@ -676,6 +679,65 @@ def test_a_client_without_its_first_camera_message_changes_nothing(short_bag: Pa
         with client(app.server.get_port()) as late:
             values = [u["value"] for _, u in _drain(late, 1.0) if "value" in u]
         assert not {1e308, 1.0, float("inf"), "bogus"} & set(values)
+
+
+def _lock_is_free(lock: threading.RLock) -> bool:
+    """Whether another thread can take ``lock`` now (within 2 s)."""
+    taken: list[bool] = []
+
+    def take() -> None:
+        got = lock.acquire(timeout=2.0)
+        if got:
+            lock.release()
+        taken.append(got)
+
+    thread = threading.Thread(target=take)
+    thread.start()
+    thread.join()
+    return taken[0]
+
+
+def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
+    short_bag: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with running_app(short_bag) as app:
+        wait(app)
+        with client(app.server.get_port()):
+            until(lambda: len(app.views) == 1)
+            wait(app)
+            figures, false_times = dict(app._figures), app._false_times.copy()
+            assert len(figures) == len(ALL_MODES)
+            free: list[tuple[str, bool]] = []
+
+            def spy(name: str, real: Callable[..., object]) -> Callable[..., object]:
+                def call(*args: object, **kwargs: object) -> object:
+                    free.append((name, _lock_is_free(app.replay.lock)))
+                    return real(*args, **kwargs)
+
+                return call
+
+            monkeypatch.setattr(
+                app_module, "false_link_times", spy("false links", app_module.false_link_times)
+            )
+            monkeypatch.setattr(
+                app_module, "compute_figures", spy("figures", app_module.compute_figures)
+            )
+            monkeypatch.setattr(
+                view_module.ClientView, "refresh", spy("view", view_module.ClientView.refresh)
+            )
+            updates = app.streamer.stats.updates
+            with app.replay.lock:  # forget the figures: the next round computes them all again
+                app._false_key = None
+                app._figures_key.clear()
+            app._update_figures(True, ALL_MODES)
+            wait(app)
+            # the replay has ended: only the figures' round publishes the scene
+            assert app.streamer.stats.updates == updates + 1
+        assert free == [("false links", True)] + [("figures", True)] * len(ALL_MODES) + [
+            ("view", True)
+        ]
+        assert app._figures == figures
+        np.testing.assert_array_equal(app._false_times, false_times)
 
 
 def test_html_replay_checks_its_folder_before_rendering(

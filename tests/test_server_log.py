@@ -18,12 +18,13 @@ from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import EventLog, SlamSession
 from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
 from tests import test_server_support as support
 from tests.test_log_cli import square_run
-from tests.test_server_support import assert_same_map, counter, running_app, wait
+from tests.test_server_support import assert_same_map, counter, running_app, until, wait
 
 short_bag = support.short_bag
 
@@ -105,6 +106,24 @@ def test_serve_refuses_a_bad_log_before_starting(tmp_path: Path, capsys) -> None
     odometry.write_text("0,1,0\n")
     assert main(["serve", str(odometry), "--frontend", "score_threshold=2"]) == 2
     assert "score_threshold=2.0 is out of range" in capsys.readouterr().err
+
+
+def test_a_session_is_refused_on_a_log_with_one_message(
+    square_log: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    said = (
+        f"--resume: sessions are for bags; {square_log} is a log of odometry and place "
+        "recognition (tuc): serve it without --resume"
+    )
+    session = tmp_path / "s.npz"
+    session.write_bytes(b"not read: refused first")
+    assert main(["serve", str(square_log), "--resume", str(session), "--port", "1"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [f"cogmap serve: error: {said}"]
+    # the app, given a session by a script, refuses it the same way when it opens the log
+    resumed = (SlamSession(LOG_MAP_PARAMS), SessionMeta())
+    with running_app(square_log, params=LOG_MAP_PARAMS, resume=resumed) as app:
+        until(lambda: app.replay.state is PlaybackState.ERROR)
+        assert app.replay.message == said
 
 
 def test_the_page_and_the_replay_judge_a_log_with_its_own_tolerances(

@@ -118,6 +118,53 @@ def test_typed_values_over_the_websocket_apply_exactly_or_are_refused(
         assert app.replay.params == MapParams(alpha=12.5, beta=7.25, delta=6.0)
 
 
+def test_refusal_texts_name_the_control_the_reason_and_the_value_kept(
+    short_bag: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The exact wording of each refusal: parameter note, seek note and the server log."""
+    with running_app(short_bag, autoplay=False) as app:
+        wait(app)
+        with client(app.server.get_port()) as ws:
+            until(lambda: len(app.views) == 1)
+            steps = [
+                (
+                    app.param_sliders["alpha"],
+                    {"value": "many"},
+                    "α: 'many' is not a number; α stays 10.0",
+                ),
+                (
+                    app.param_sliders["delta"],
+                    {"max": 1e9},
+                    "δ: property max is not the client's; δ stays 3.746",
+                ),
+                (app.param_boxes["beta"], {"value": "x"}, "β: 'x' is not a number; β stays 10"),
+                (
+                    app.param_boxes["delta"],
+                    {"min": 0},
+                    "δ: property min is not the client's; δ stays 3.746",
+                ),
+            ]
+            for handle, updates, said in steps:
+                send(ws, handle, **updates)
+                expected = app._params_message(f"refused {said}", error=True)
+                until(lambda e=expected: app.params_md.content == e, what=said)
+            send(ws, app.seek_box, value="abc")
+            until(lambda: "cogmap-message" in app.status_html.content)
+            assert app.status_note == "refused go to (s): 'abc' is not a number; kept '0'"
+            with caplog.at_level("WARNING", logger="app.server.app"):
+                send(ws, app.speed_dropdown, value="bogus")
+                until(lambda: "bogus" in caplog.text)
+            options = ", ".join(("0.25x", "0.5x", "1x", "2x", "5x", "10x", "20x", "max"))
+            assert caplog.messages[-1] == (
+                f"GUI value from a client refused speed: 'bogus' is not one of {options}; "
+                "kept 'max'"
+            )
+        app.type_param("delta", "abc")  # as a browser's box sends it, without the gate
+        assert app.params_md.content == app._params_message(
+            "refused δ: 'abc' is not a number; δ stays 3.746", error=True
+        )
+
+
 # ---------------------------------------------------------------------------- chart
 def test_size_chart_in_data_seconds_with_optimisation_markers(
     short_bag: Path, reference: SlamSession

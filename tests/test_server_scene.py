@@ -11,9 +11,11 @@ import viser
 from app.server.scene import (
     CHUNK,
     FALSE_LOOP_COLOR,
+    LOOP_Z,
     MAP_COLORS,
     ROBOT_COLOR,
     SEQUENTIAL_COLOR,
+    SEQUENTIAL_Z,
     ChunkedNodes,
     MapExtras,
     MapLayer,
@@ -21,12 +23,20 @@ from app.server.scene import (
     StreamStats,
     _lab,
     cluster_color,
+    edge_error,
     edge_errors,
+    edge_segments,
 )
+from app.server.view import describe_edge
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry
+from cogmap_core.slam import SlamSession
+from tests import test_server_support as support
 from tests.test_server_support import make_server
+
+short_bag = support.short_bag
+reference = support.reference
 
 
 class FakeNode:
@@ -68,6 +78,28 @@ def test_chunked_nodes_send_only_changed_chunks() -> None:
     log.clear()
     nodes.clear()
     assert log == ["remove /x/c0000", "remove /x/c0001"] and nodes.num_items == 0
+
+
+def test_a_changed_chunk_is_updated_in_place_by_the_updater() -> None:
+    log: list[str] = []
+
+    def factory(name: str, part: np.ndarray, colors: np.ndarray | None) -> FakeNode:
+        log.append(f"send {name} {part.shape[0]}")
+        return FakeNode(log, name)
+
+    def updater(handle: FakeNode, part: np.ndarray, colors: np.ndarray | None) -> None:
+        log.append(f"update {handle.name} {part.shape[0]}")
+
+    nodes = ChunkedNodes("/x", factory, StreamStats(), chunk=4, updater=updater)  # type: ignore[arg-type]
+    items = np.arange(18, dtype=np.float32).reshape(6, 3)
+    assert nodes.sync(items) == 2
+    first = list(nodes._handles)
+    log.clear()
+    grown = np.concatenate([items, np.ones((1, 3), dtype=np.float32)])
+    assert nodes.sync(grown) == 1
+    assert log == ["update /x/c0001 3"]  # the node is kept, not made again
+    assert nodes._handles == first
+    np.testing.assert_array_equal(nodes.items(), grown)
 
 
 def circle_events(vertices: int, laps: int = 2, start: int = 0) -> list[MapEvent]:
@@ -239,3 +271,48 @@ def test_false_loop_closures_truth_alignment_and_vertex_size(server: viser.Viser
     streamer.show((MapMode.COMPACT,))
     streamer.publish({MapMode.COMPACT: sparse})
     assert streamer.layers[MapMode.COMPACT].point_size == 0.03
+
+
+def test_one_edges_residual_is_the_whole_graphs_to_the_last_bit(
+    reference: SlamSession, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    identity = CognitiveMap(MapMode.STANDARD, MapParams(edge_noise_model=0.0))
+    identity.apply_all(circle_events(300, laps=2))
+    identity.finish()  # optimised: the residuals are not all zero
+    maps = [*reference.maps.maps.values(), identity]
+    expected = [(cmap, cmap.snapshot(), edge_errors(cmap)) for cmap in maps]
+    assert identity.params.link_sigmas() is None and reference.params.link_sigmas() is not None
+    assert max(float(errors.max()) for _, _, errors in expected) > 0.05  # not all near zero
+    monkeypatch.setattr(CognitiveMap, "to_pose_graph", None)  # one edge needs no pose graph
+    for cmap, snap, errors in expected:
+        assert errors.shape[0] == snap.edge_from.shape[0] and np.any(errors > 0)
+        sigmas = cmap.params.link_sigmas()
+        for k in range(errors.shape[0]):
+            assert edge_error(snap, k, sigmas) == errors[k]
+        for k in (0, int(np.argmax(errors)), errors.shape[0] - 1):
+            text = describe_edge(cmap, snap, k, np.zeros(0))
+            assert f"<td>residual</td><td>{errors[k]:.2f} σ (whitened" in text
+
+
+def test_edge_segments_join_each_edges_vertices_at_its_height(server: viser.ViserServer) -> None:
+    cmap = CognitiveMap(MapMode.STANDARD)
+    cmap.apply_all(circle_events(300, laps=2))
+    cmap.finish()
+    snap = cmap.snapshot()
+    rows = {int(v): k for k, v in enumerate(snap.vertex_ids)}
+    flat = edge_segments(snap)
+    assert flat.shape == (cmap.num_edges, 2, 3) and flat.dtype == np.float32
+    for k, (a, b) in enumerate(zip(snap.edge_from.tolist(), snap.edge_to.tolist(), strict=True)):
+        expected = np.float32(snap.poses[[rows[a], rows[b]], :2])
+        np.testing.assert_array_equal(flat[k, :, :2], expected)
+    assert (flat[:, :, 2] == 0).all()
+    assert edge_segments(CognitiveMap(MapMode.STANDARD).snapshot(), 1.0).shape == (0, 2, 3)
+    # the layer draws the same segments, sequential and loop-closure edges at their heights
+    layer = MapLayer(server, MapMode.STANDARD, StreamStats())
+    layer.update(cmap)
+    is_loop = snap.edge_kind == 1
+    for name, chosen, z in (("sequential", ~is_loop, SEQUENTIAL_Z), ("loop", is_loop, LOOP_Z)):
+        drawn = layer.edges[f"{name}/cluster"].items()
+        assert drawn is not None
+        np.testing.assert_array_equal(drawn[:, :, :2], flat[chosen, :, :2])
+        assert (drawn[:, :, 2] == np.float32(z)).all()

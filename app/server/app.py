@@ -20,7 +20,6 @@ from __future__ import annotations
 import html
 import logging
 import math
-import re
 import threading
 import time
 import traceback
@@ -45,6 +44,7 @@ from app.server.figures import (
     FigureInputs,
     MapFigures,
     compute_figures,
+    false_link_inputs,
     false_link_times,
     figure_inputs,
     layout_radius_label,
@@ -64,7 +64,17 @@ from app.server.params import (
 from app.server.rebuild import make_builder
 from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
 from app.server.scene import MapExtras, SceneStreamer, cluster_color
-from app.server.validation import Adjusted, GuiGate, Refused, choice, click, number, text
+from app.server.validation import (
+    Adjusted,
+    Adjustment,
+    GuiGate,
+    Refusal,
+    Refused,
+    choice,
+    click,
+    number,
+    text,
+)
 from app.server.view import ClientView, Pick, nearest_pick, swatch
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams
@@ -116,8 +126,8 @@ def recent_links(log: EventLog, frames: int, count: int) -> list[tuple[float, in
     ]
 
 
-def _log_refusal(message: str) -> None:
-    log.warning("GUI value from a client %s", message)
+def _log_refusal(note: Refusal | Adjustment) -> None:
+    log.warning("GUI value from a client %s", note.message)
 
 
 class _RateLimit:
@@ -423,7 +433,7 @@ class CogmapApp:
             gate.guard(
                 self.param_boxes[spec.name],
                 self._box_check(spec),
-                label=f"{spec.label} box",
+                label=spec.label,
                 note=self._param_note,
             )
         gate.guard(self.replay_path, text())
@@ -585,8 +595,8 @@ class CogmapApp:
 
         return check
 
-    def _seek_note(self, message: str) -> None:
-        self.status_note = message
+    def _seek_note(self, note: Refusal | Adjustment) -> None:
+        self.status_note = note.message
         self._update_status(force=True)
 
     def _on_seek_box(self) -> None:
@@ -604,15 +614,18 @@ class CogmapApp:
         cls = "cogmap-note cogmap-error" if error else "cogmap-note"
         return f'<div class="{cls}" id="cogmap-params-message">{html.escape(text)}</div>'
 
-    def _param_note(self, message: str) -> None:
-        error = message.startswith("refused")
-        # the gate's "refused δ box: 'abc' is not a number; kept '3.746'" reads better as
-        # "refused δ: 'abc' is not a number; δ stays 3.746"
-        found = re.fullmatch(r"refused (.+?)(?: box)?: (.*); kept '?(.*?)'?", message)
-        if found is not None:
-            label, reason, kept = found.groups()
-            message = f"refused {label}: {reason}; {label} stays {kept}"
-        self.params_md.content = self._params_message(message, error)
+    def _param_note(self, note: Refusal | Adjustment) -> None:
+        """Show what the gate did with a parameter's value.
+
+        A refusal reads ``refused δ: 'abc' is not a number; δ stays 3.746``.
+        """
+        if isinstance(note, Adjustment):
+            self.params_md.content = self._params_message(note.message)
+            return
+        kept = note.kept if isinstance(note.kept, str) else repr(note.kept)
+        self.params_md.content = self._params_message(
+            f"refused {note.label}: {note.reason}; {note.label} stays {kept}", error=True
+        )
 
     def _set_quietly(self, handle: Any, value: Any) -> None:
         self._setting.params = True
@@ -690,7 +703,7 @@ class CogmapApp:
             value = self._box_check(spec)(typed)
         except Refused as exc:
             current = getattr(self.replay.params, spec.name)
-            self._param_note(f"refused {spec.label} box: {exc}; kept {format_value(current)!r}")
+            self._param_note(Refusal(spec.label, str(exc), format_value(current)))
             return
         message = None
         if isinstance(value, Adjusted):
@@ -700,7 +713,7 @@ class CogmapApp:
         else:
             box.value = value
         if message is not None and self._typed.pop(spec.name, None) is not None:
-            self._param_note(message)  # (the box's callback did not run)
+            self.params_md.content = self._params_message(message)  # (no callback ran)
 
     def current_slider_params(self) -> MapParams:
         """The parameters the controls show, each clamped into its slider's range.
@@ -849,9 +862,12 @@ class CogmapApp:
     def _compute_figures(self, modes: list[MapMode]) -> None:
         """Compute the figures of ``modes`` that changed, holding the replay lock only to copy.
 
-        The computation (some 30 ms per map) runs without the lock, so playback and rebuilds
-        do not wait for it; figures of a replay that was swapped for another bag meanwhile, or
-        of a map that changed meanwhile, are dropped (the next round computes them again).
+        The inputs (the maps' snapshots, a copy of the log for the false links) are taken under
+        the lock; the computation (some 30 ms per map) runs without it, so playback and rebuilds
+        do not wait for it. The results are stored and the scene republished under the lock
+        (a paused replay publishes nothing else); the views then refresh, each taking the lock
+        for what it reads. Figures of a replay that was swapped for another bag meanwhile are
+        dropped; those of a map that changed meanwhile are computed again next round.
         """
         replay = self.replay
         todo: list[tuple[MapMode, tuple[int, ...], FigureInputs]] = []
@@ -860,38 +876,35 @@ class CogmapApp:
                 return
             log_ = replay.session.log
             judging = replay.session.evaluation
-            key = (id(log_), log_.frames)
-            changed = key != self._false_key
-            if changed:
-                self._false_key = key
-                self._false_times = false_link_times(log_, judging)
+            false_key = (id(log_), log_.frames)
+            false_inputs = false_link_inputs(log_) if false_key != self._false_key else None
             for mode in modes:
                 cmap = replay.session.maps[mode]
                 mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
                         log_.frames)  # fmt: skip
                 if self._figures_key.get(mode) != mkey:
                     todo.append((mode, mkey, figure_inputs(log_, cmap)))
-        for mode, mkey, inputs in todo:
-            figures = compute_figures(inputs, judging)
-            with replay.lock, self.scene_lock:
-                if replay is not self.replay:
-                    return
-                self._figures_key[mode] = mkey
-                self._figures[mode] = figures
-                self.stats_version += 1
-            changed = True
-        if not changed:
+        false_times = None if false_inputs is None else false_link_times(false_inputs, judging)
+        computed = [(mode, mkey, compute_figures(inputs, judging)) for mode, mkey, inputs in todo]
+        if false_times is None and not computed:
             return
         with replay.lock, self.scene_lock:
             if replay is not self.replay:
                 return
+            if false_times is not None:
+                self._false_key = false_key
+                self._false_times = false_times
+            for mode, mkey, figures in computed:
+                self._figures_key[mode] = mkey
+                self._figures[mode] = figures
+                self.stats_version += 1
             self._publish_scene()  # the truth's alignment, the false loop closures
             self._update_counters()
-            for view in list(self.views.values()):
-                try:
-                    view.refresh()
-                except Exception:
-                    traceback.print_exc()
+        for view in list(self.views.values()):
+            try:
+                view.refresh()
+            except Exception:
+                traceback.print_exc()
 
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log

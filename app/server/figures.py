@@ -114,6 +114,15 @@ def false_link_label(judging: EvaluationSettings) -> str:
     return text
 
 
+def false_link_inputs(log: EventLog) -> EventLog:
+    """Copy what :func:`false_link_times` reads from ``log`` (hold the replay's lock while calling).
+
+    The copy (a few milliseconds) can then be judged without the lock while the replay goes on;
+    without ground truth nothing is judged, so nothing is copied (an empty log).
+    """
+    return log.truncated(log.frames) if log.has_ground_truth() else EventLog()
+
+
 def false_link_times(log: EventLog, judging: EvaluationSettings | None = None) -> FloatArray:
     """Times of the links the ground truth calls false (with ``judging``'s tolerances).
 

@@ -90,6 +90,20 @@ PARAMS_USED: dict[MapMode, frozenset[str]] = {
 }
 
 
+def check_resumable(path: Path | str, fmt: str) -> None:
+    """Refuse to continue a saved session on ``path`` unless it is a bag (format ``fmt``).
+
+    Raises:
+        ParameterError: ``path`` is a log of odometry and place recognition.
+
+    """
+    if not KINDS[fmt].has_camera:
+        raise ParameterError(
+            f"--resume: sessions are for bags; {path} is a log of odometry and place "
+            f"recognition ({fmt}): serve it without --resume"
+        )
+
+
 def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:
     """Whether map ``mode`` built with ``old`` can differ from one built with ``new``."""
     return any(getattr(old, name) != getattr(new, name) for name in PARAMS_USED[mode])
@@ -505,11 +519,8 @@ class Replay:
             path = self._resolve_bag()
             self.bag_path = path
             fmt = resolve_format(path, self.format)
-            if self.resume_meta is not None and not KINDS[fmt].has_camera:
-                raise ParameterError(
-                    f"{path} is a log of odometry and place recognition ({fmt}): sessions are "
-                    "for bags; replay it without a session to resume"
-                )
+            if self.resume_meta is not None:
+                check_resumable(path, fmt)
             reader, self._opened = self._opened, None
             if reader is None:
                 reader = open_source(

@@ -39,6 +39,8 @@ import viser
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
+from cogmap_core.edge_noise import edge_information
+from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.optimizer import EdgeModel, edge_terms
 
 FloatArray = NDArray[np.float64]
@@ -192,9 +194,35 @@ def edge_errors(cmap: CognitiveMap) -> FloatArray:
     graph = cmap.to_pose_graph()
     if graph.num_edges == 0:
         return np.zeros(0)
-    model = EdgeModel(graph.measurements, graph.information)
     x = graph.poses
-    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, None, False)
+    return _whitened_norms(
+        x[graph.edge_from], x[graph.edge_to], graph.measurements, graph.information
+    )
+
+
+def edge_error(snap: MapSnapshot, index: int, link_sigmas: tuple[float, float] | None) -> float:
+    """The norm of edge ``index``'s whitened residual: :func:`edge_errors` of that edge alone.
+
+    Computed from the edge's two vertex poses, its measurement and its information (with the
+    map's ``link_sigmas``, :meth:`~cogmap_core.config.MapParams.link_sigmas`), not from the
+    whole pose graph.
+    """
+    edge = slice(index, index + 1)
+    first, second = np.searchsorted(snap.vertex_ids, (snap.edge_from[index], snap.edge_to[index]))
+    measurement = snap.edge_rel[edge]
+    information = edge_information(snap.edge_kind[edge], measurement, link_sigmas)
+    norms = _whitened_norms(
+        snap.poses[first : first + 1], snap.poses[second : second + 1], measurement, information
+    )
+    return float(norms[0])
+
+
+def _whitened_norms(
+    pose_from: FloatArray, pose_to: FloatArray, measurements: FloatArray, information: FloatArray
+) -> FloatArray:
+    """Per edge, ``‖S r‖``: the norm of the residual whitened by its information."""
+    model = EdgeModel(measurements, information)
+    res, _ = edge_terms(pose_from, pose_to, model, None, False)
     return np.sqrt(np.einsum("ka,ka->k", res, res))
 
 
@@ -216,8 +244,8 @@ class StreamStats:
 
 
 NodeFactory = Callable[[str, np.ndarray, np.ndarray | None], viser.SceneNodeHandle]
-#: Puts new content into an existing node (returns False when it cannot).
-NodeUpdater = Callable[[viser.SceneNodeHandle, np.ndarray, np.ndarray | None], bool]
+#: Puts new content (items, colours) into an existing node, in place.
+NodeUpdater = Callable[[viser.SceneNodeHandle, np.ndarray, np.ndarray | None], None]
 
 
 class ChunkedNodes:
@@ -288,10 +316,10 @@ class ChunkedNodes:
                     continue
             record = (part.copy(), None if cpart is None else cpart.copy())
             if c < len(self._handles):
-                handle = self._handles[c]
-                if self.updater is None or not self.updater(handle, part, cpart):
-                    handle = self.factory(f"{self.name}/c{c:04d}", part, cpart)
-                self._handles[c] = handle
+                if self.updater is None:
+                    self._handles[c] = self.factory(f"{self.name}/c{c:04d}", part, cpart)
+                else:
+                    self.updater(self._handles[c], part, cpart)
                 self._sent[c] = record
             else:
                 self._handles.append(self.factory(f"{self.name}/c{c:04d}", part, cpart))
@@ -325,6 +353,22 @@ def path_segments(poses: FloatArray, z: float) -> NDArray[np.float32]:
     seg[:, 1, :2] = poses[1:, :2]
     seg[:, :, 2] = z
     return seg
+
+
+def edge_segments(snap: MapSnapshot, heights: float | FloatArray = 0.0) -> NDArray[np.float32]:
+    """The edges of ``snap`` as line segments ``(m, 2, 3)`` from the first vertex to the second.
+
+    ``heights``: the segments' z, one for all or one per edge.
+    """
+    m = snap.edge_from.shape[0]
+    segments = np.empty((m, 2, 3), dtype=np.float32)
+    if m:
+        first, second = snap.edge_ends()
+        segments[:, 0, :2] = snap.poses[first, :2]
+        segments[:, 1, :2] = snap.poses[second, :2]
+    z = np.asarray(heights)
+    segments[:, :, 2] = z[:, None] if z.ndim else z
+    return segments
 
 
 def robot_triangle(size: float) -> tuple[NDArray[np.float32], NDArray[np.int32]]:
@@ -423,7 +467,7 @@ class MapLayer:
 
             return make
 
-        def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> bool:
+        def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> None:
             with server.atomic():
                 handle.points = part
                 handle.colors = np.broadcast_to(
@@ -431,16 +475,14 @@ class MapLayer:
                 ).copy()
                 if handle.point_size != self.point_size:
                     handle.point_size = self.point_size
-            return True
 
         def move_segments(color: tuple[int, int, int] | None) -> NodeUpdater:
-            def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> bool:
+            def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> None:
                 if cols is None:
                     cols = np.broadcast_to(np.array(color, np.uint8), part.shape).copy()
                 with server.atomic():
                     handle.points = part
                     handle.colors = cols
-                return True
 
             return update
 
@@ -574,14 +616,8 @@ class MapLayer:
         points = np.empty((n, 3), dtype=np.float32)
         points[:, :2] = snap.poses[:, :2]
         points[:, 2] = VERTEX_Z
-        m = snap.edge_from.shape[0]
-        segments = np.empty((m, 2, 3), dtype=np.float32)
-        if m:
-            ends = snap.edge_ends()
-            segments[:, 0, :2] = snap.poses[ends[0], :2]
-            segments[:, 1, :2] = snap.poses[ends[1], :2]
         is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
-        segments[:, :, 2] = np.where(is_loop, LOOP_Z, SEQUENTIAL_Z)[:, None]
+        segments = edge_segments(snap, np.where(is_loop, LOOP_Z, SEQUENTIAL_Z))
         size = self._point_size(segments[~is_loop])
         resized = size != self.point_size
         self.point_size = size

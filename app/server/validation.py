@@ -20,9 +20,11 @@ value.
   back as usual; a refused one is dropped, and the value in force is sent back to every client
   so that the sender's control shows it again.
 
-Refusals and adjustments are reported to ``note`` (one line each) when given; a check may word
-its adjustment itself by returning :class:`Adjusted`. The same gate guards a client's own
-controls (``ClientHandle.gui``: the per-viewer view settings).
+Refusals and adjustments are reported to ``note`` when given, as a :class:`Refusal` (the
+control's label, the reason, the value kept) or an :class:`Adjustment` (its ``message``); each
+has a one-line ``message``, and a page may word a refusal its own way from its fields. A check
+may word its adjustment itself by returning :class:`Adjusted`. The same gate guards a client's
+own controls (``ClientHandle.gui``: the per-viewer view settings).
 """
 
 from __future__ import annotations
@@ -37,7 +39,6 @@ from viser import _messages
 
 #: A check returns the value to apply (possibly adjusted) or raises :class:`Refused`.
 Check = Callable[[Any], Any]
-Note = Callable[[str], None]
 
 _MAX_TEXT = 4096
 
@@ -52,6 +53,34 @@ class Adjusted:
 
     value: Any
     message: str
+
+
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    """A value the gate refused: the control's ``label``, the ``reason`` and the value ``kept``."""
+
+    label: str
+    reason: str
+    kept: Any
+
+    @property
+    def message(self) -> str:
+        """The refusal in one line: ``refused δ: 'abc' is not a number; kept '3.746'``."""
+        return f"refused {self.label}: {self.reason}; kept {self.kept!r}"
+
+
+@dataclass(frozen=True, slots=True)
+class Adjustment:
+    """A value the gate applied changed (clamped, normalised): ``message`` says how."""
+
+    label: str
+    sent: Any
+    value: Any
+    message: str
+
+
+#: Where the gate reports what it refused or adjusted.
+Note = Callable[[Refusal | Adjustment], None]
 
 
 def choice(options: Sequence[str] | Callable[[], Sequence[str]]) -> Check:
@@ -217,7 +246,8 @@ class GuiGate:
             if not handle._impl.is_button:
                 self._resend(handle)
             if note is not None and value != sent:
-                note(wording or f"{label} = {sent!r} is out of range: set to {value!r}")
+                message = wording or f"{label} = {sent!r} is out of range: set to {value!r}"
+                note(Adjustment(label, sent, value, message))
         return None
 
     def _refuse(self, handle: Any, label: str, reason: str, note: Note | None) -> None:
@@ -225,7 +255,7 @@ class GuiGate:
         if not handle._impl.is_button:
             self._resend(handle)
         if note is not None:
-            note(f"refused {label}: {reason}; kept {handle._impl.value!r}")
+            note(Refusal(label, reason, handle._impl.value))
 
     def _resend(self, handle: Any) -> None:
         """Send the value in force to every client (the sender's control shows it again)."""

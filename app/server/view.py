@@ -45,7 +45,8 @@ from app.server.scene import (
     SEQUENTIAL_COLOR,
     TIME_RAMP_CSS,
     cluster_color,
-    edge_errors,
+    edge_error,
+    edge_segments,
 )
 from app.server.validation import GuiGate, boolean, choice, click
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
@@ -606,18 +607,13 @@ class ClientView:
                     point_shading="flat",
                 )
             )
-        m = snap.edge_from.shape[0]
-        if m:
-            seg = np.zeros((m, 2, 3), dtype=np.float32)
-            ends = snap.edge_ends()
-            seg[:, 0, :2] = snap.poses[ends[0], :2]
-            seg[:, 1, :2] = snap.poses[ends[1], :2]
+        if snap.edge_from.shape[0]:
             loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
             colors = np.where(loop[:, None], (110, 60, 170), (185, 170, 215)).astype(np.uint8)
             self._pinned_nodes.append(
                 scene.add_line_segments(
                     "/pinned/edges",
-                    seg,
+                    edge_segments(snap),
                     colors=np.repeat(colors[:, None, :], 2, axis=1),
                     thickness=2.0,
                     thickness_units="screen",
@@ -711,8 +707,7 @@ def describe_edge(
     """What the page says about edge ``index`` of ``snap`` (with its residual)."""
     kind = "loop closure" if snap.edge_kind[index] == EdgeKind.LOOP_CLOSURE else "sequential"
     dx, dy, dtheta = snap.edge_rel[index]
-    errors = edge_errors(cmap)
-    residual = float(errors[index]) if index < errors.shape[0] else math.nan
+    residual = edge_error(snap, index, cmap.params.link_sigmas())
     rows = [
         ("map", cmap.mode.value),
         ("edge", f"{int(snap.edge_from[index])} → {int(snap.edge_to[index])} ({kind})"),
