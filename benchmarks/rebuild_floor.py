@@ -1,0 +1,113 @@
+"""What an exact rebuild costs at least: the event replay alone against the whole rebuild.
+
+A parameter change on the page rebuilds a map exactly as ``cogmap run`` builds it (see
+``app/server/rebuild.py``): every front-end event is applied again and every batch optimisation
+of the cluster schedule runs again. This benchmark splits that cost in two for each map:
+
+- **full**: the rebuild as the page does it (events and the Ceres solves);
+- **events only**: the same replay with every solve skipped (the optimiser returns its start
+  poses, so the maps differ; only the time counts). No exact rebuild can be faster than this:
+  an α, β or δ change alters the compact map from its first proposal on, and a T_interval or
+  T_total change alters every map from the first cluster whose schedule moves.
+
+It also counts the optimisations a scene-integration map runs. Their number is set by the
+cluster schedule, and scene integration decides after each one which vertices to remove (the
+paper: "we remove revisited vertices after optimization"), so the solves cannot be skipped or
+merged without changing the map.
+
+    python benchmarks/rebuild_floor.py [BAG] [--long BAG60]
+
+Times are the best of ``--repeat`` runs in this process; the ratio column is events-only / full.
+The last line reads ``events-only floor: N ms (MAP, BAG)`` for the longest bag given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import cogmap_core.cognitive_map as cognitive_map  # noqa: E402
+from app.cli_common import resolve_bag  # noqa: E402
+from app.sweep import cached_bag_events  # noqa: E402
+from cogmap_core.cognitive_map import CognitiveMap, MapMode  # noqa: E402
+from cogmap_core.config import MapParams  # noqa: E402
+from cogmap_core.optimizer import OptimizationResult  # noqa: E402
+from cogmap_core.posegraph import PoseGraph  # noqa: E402
+from cogmap_core.slam import EventLog  # noqa: E402
+
+#: A compact-map parameter change (as a δ slider move makes it); the other maps do not use δ.
+CHANGED = MapParams().with_changes(delta=4.5)
+
+
+def _start_poses(graph: PoseGraph, options: object = None) -> OptimizationResult:
+    """An optimiser that returns its start poses at no cost (events-only timing)."""
+    return OptimizationResult(graph.poses.copy(), 0.0, 0.0, 0, 0.0, "SKIPPED")
+
+
+@contextlib.contextmanager
+def solves_skipped() -> Iterator[None]:
+    """Every batch optimisation of the maps built inside returns its start poses."""
+    real = cognitive_map.optimize_pose_graph
+    cognitive_map.optimize_pose_graph = _start_poses  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        cognitive_map.optimize_pose_graph = real
+
+
+def build_seconds(log: EventLog, mode: MapMode, repeat: int) -> tuple[float, int]:
+    """Best time (s) of building ``mode`` from the whole log, and its optimisation count."""
+    events = list(log.events)
+    best, count = float("inf"), 0
+    for _ in range(repeat):
+        started = time.perf_counter()
+        cmap = CognitiveMap(mode, CHANGED)
+        cmap.apply_all(events)
+        cmap.finish(float(log.frame_time[-1]))
+        best = min(best, time.perf_counter() - started)
+        count = len(cmap.optimizations)
+    return best, count
+
+
+def measure(bag: Path, repeat: int) -> tuple[float, MapMode]:
+    """Print the table for one bag; return its lowest events-only floor among the maps."""
+    log = EventLog.from_recording(cached_bag_events(bag, print))
+    print(f"{bag.name}: {log.frames} frames, {log.event_count} events")
+    header = ("full ms", 9), ("events only ms", 15), ("ratio", 6), ("optimisations", 14)
+    print(f"{'map':18s} " + " ".join(f"{name:>{width}s}" for name, width in header))
+    floors: list[tuple[float, MapMode]] = []
+    for mode in (MapMode.COMPACT, MapMode.SCENE_INTEGRATION, MapMode.STANDARD):
+        full, count = build_seconds(log, mode, repeat)
+        with solves_skipped():
+            events_only, _ = build_seconds(log, mode, repeat)
+        floors.append((events_only, mode))
+        print(
+            f"{mode.value:18s} {1000 * full:9.0f} {1000 * events_only:15.0f} "
+            f"{events_only / full:6.2f} {count:14d}"
+        )
+    return min(floors, key=lambda f: f[0])
+
+
+def main() -> int:
+    """Measure the default dataset (and a long bag when given)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("bag", nargs="?", help="bag (default: the built-in default dataset)")
+    parser.add_argument("--long", metavar="BAG", help="also a long bag (e.g. 60 laps)")
+    parser.add_argument("--repeat", type=int, default=2, help="runs per figure (best kept)")
+    args = parser.parse_args()
+    bags = [resolve_bag(args.bag)] + ([Path(args.long)] if args.long else [])
+    floor = (0.0, MapMode.COMPACT)
+    for bag in bags:
+        floor = measure(bag, args.repeat)
+    print(f"events-only floor: {1000 * floor[0]:.0f} ms ({floor[1].value}, {bags[-1].name})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
