@@ -24,9 +24,9 @@ from app.report import ReportFolder
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError, InputFileError, OutputError, ParameterError
+from cogmap_core.errors import CogmapError, InputFileError, ParameterError
 from cogmap_core.evaluation import LAYOUT_RADIUS, align_rigid_2d
-from cogmap_core.fileio import check_writable, output_error
+from cogmap_core.fileio import check_output_file, output_error
 from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
@@ -335,7 +335,7 @@ class HeadlessPipeline:
                 f"recognition ({self.format}): run it whole, without {flag}"
             )
         if options.save_session is not None:
-            check_session_target(options.save_session, options.force)
+            check_output_file(options.save_session, "--save-session", options.force)
         self.meta: SessionMeta | None = None
         self.session: SlamSession  # set by run(), once the output folder is checked
 
@@ -555,20 +555,6 @@ class HeadlessPipeline:
                     f"correctness {entry['correctness']:.3f}"
                 )
         save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
-
-
-def check_session_target(path: Path, force: bool) -> None:
-    """Refuse a session file target that would fail only at the end of a long run."""
-    if path.is_dir():
-        raise OutputError(f"{path} is a directory; give --save-session a file name")
-    if path.exists() and not force:
-        raise OutputError(
-            f"{path} already exists; choose another --save-session file or pass --force to "
-            "overwrite it"
-        )
-    if not path.parent.is_dir():
-        raise OutputError(f"folder {path.parent} of --save-session does not exist; create it")
-    check_writable(path.parent)  # a probe file: mode bits do not stop root
 
 
 def run_headless(
