@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.plots import map_figure, save_png, size_figure
 from app.report import ReportFolder
@@ -25,10 +26,17 @@ from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError, ParameterError
-from cogmap_core.evaluation import LAYOUT_RADIUS, align_rigid_2d
+from cogmap_core.evaluation import (
+    LAYOUT_RADIUS,
+    LayoutFidelity,
+    absolute_trajectory_error,
+    align_rigid_2d,
+    layout_fidelity,
+)
 from cogmap_core.fileio import check_output_file, output_error
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
+from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
@@ -134,6 +142,47 @@ class RunResult:
         return "\n".join(lines)
 
 
+@dataclass(frozen=True, slots=True)
+class FinalMap:
+    """One map as the report sees it: copied once (a snapshot), with its vertices' ground truth.
+
+    Attributes:
+        cmap: the map itself (its counters, optimisations and size history).
+        snapshot: a copy of its live vertices and edges.
+        truth: the ground-truth pose at each live vertex's creation time (rows of
+            ``snapshot``), or None without ground truth.
+
+    """
+
+    cmap: CognitiveMap
+    snapshot: MapSnapshot
+    truth: NDArray[np.float64] | None
+
+    def ate(self) -> float | None:
+        """RMSE of the vertex positions against ground truth after rigid alignment (m)."""
+        if self.cmap.num_vertices == 0 or self.truth is None:
+            return None
+        return absolute_trajectory_error(self.snapshot.poses, self.truth)
+
+    def layout_fidelity(self, session: SlamSession, radius: float) -> LayoutFidelity | None:
+        """Completeness and correctness against the session's dense true path (None without)."""
+        if self.truth is None:
+            return None
+        snap = self.snapshot
+        dense_truth = np.asarray(session.log.ground_truth)
+        return layout_fidelity(snap.poses, self.truth, *snap.edge_ends(), dense_truth, radius)
+
+
+def final_maps(session: SlamSession) -> dict[MapMode, FinalMap]:
+    """Every map of ``session`` copied once, for everything a report computes and writes."""
+    maps = {}
+    for mode in MAP_ORDER:
+        cmap = session.maps[mode]
+        snapshot = cmap.snapshot()
+        maps[mode] = FinalMap(cmap, snapshot, session.log.truth_at(snapshot.vertex_time))
+    return maps
+
+
 def session_summary(
     session: SlamSession,
     dataset: str,
@@ -143,6 +192,7 @@ def session_summary(
     read_warnings: dict[str, Any],
     layout_radius: float | None = None,
     source: dict[str, Any] | None = None,
+    maps: Mapping[MapMode, FinalMap] | None = None,
 ) -> dict[str, Any]:
     """The ``summary.json`` of a session: per map sizes, fidelity, accuracy, timings; links.
 
@@ -157,19 +207,23 @@ def session_summary(
             session's (:attr:`SlamSession.evaluation`).
         source: what the input is and how it was read (``format``, a log's settings and what
             became of its loop candidates).
+        maps: the session's maps as :func:`final_maps` copied them (default: copied here).
 
     """
     judging = session.evaluation
     if layout_radius is None:
         layout_radius = judging.layout_radius
     duration = max(last - first, 0.0)
-    maps: dict[str, Any] = {}
+    if maps is None:
+        maps = final_maps(session)
+    entries: dict[str, Any] = {}
     for mode in MAP_ORDER:
-        cmap = session.maps[mode]
+        final = maps[mode]
+        cmap = final.cmap
         entry: dict[str, Any] = optimisation_summary(cmap)
-        ate = session.ate(cmap)
+        ate = final.ate()
         entry["ate_m"] = None if ate is None else round(ate, 6)
-        fidelity = session.layout_fidelity(cmap, layout_radius)
+        fidelity = final.layout_fidelity(session, layout_radius)
         entry["edges_per_vertex"] = (
             round(cmap.num_edges / cmap.num_vertices, 4) if cmap.num_vertices else None
         )
@@ -182,7 +236,7 @@ def session_summary(
         entry["short_edges_removed"] = c.short_edges
         entry["duplicate_links"] = c.duplicate_links
         entry["refused_relocalisations"] = c.refused_relocalisations
-        maps[mode.value] = entry
+        entries[mode.value] = entry
     score = session.loop_closure_score()
     links = session.log.link_table()
     if score is None:
@@ -225,7 +279,7 @@ def session_summary(
         },
         "layout_radius_m": layout_radius,
         "dead_reckoning_ate_m": None if dead_reckoning is None else round(dead_reckoning, 6),
-        "maps": maps,
+        "maps": entries,
         "loop_closures": loops,
         "read_warnings": read_warnings,
         "source": dict(source or {}),
@@ -387,15 +441,16 @@ class HeadlessPipeline:
                 self._save_session(self.options.save_session)
             self.session.finish()
             wall = wallclock.perf_counter() - started
-            summary = self._summary(reader, first, last, wall)
+            maps = final_maps(self.session)
+            summary = self._summary(reader, first, last, wall, maps)
             self._announce(f"writing the report to {report.out_dir}")
             with report.writing():
                 self._write_config(report)
                 self._write_summary(report, summary)
                 self._write_sizes(report)
                 self._write_maps(report)
-                self._write_trajectories(report)
-                self._write_figures(report, last, summary)
+                self._write_trajectories(report, maps[MapMode.STANDARD])
+                self._write_figures(report, last, summary, maps)
             self.files = report.commit()
         return RunResult(
             summary, report.out_dir, list(self.files), reader.warnings, list(self.session_notes)
@@ -449,7 +504,14 @@ class HeadlessPipeline:
             f"{session_description(self.meta, self.session)}"
         )
 
-    def _summary(self, reader: Source, first: float, last: float, wall: float) -> dict[str, Any]:
+    def _summary(
+        self,
+        reader: Source,
+        first: float,
+        last: float,
+        wall: float,
+        maps: Mapping[MapMode, FinalMap],
+    ) -> dict[str, Any]:
         return session_summary(
             self.session,
             str(self.bag),
@@ -458,6 +520,7 @@ class HeadlessPipeline:
             wall,
             read_warnings(reader),
             source=source_description(reader),
+            maps=maps,
         )
 
     @staticmethod
@@ -491,15 +554,14 @@ class HeadlessPipeline:
         for mode in MAP_ORDER:
             write_g2o(self.session.maps[mode].to_pose_graph(), report.path(f"{mode.value}.g2o"))
 
-    def _write_trajectories(self, report: ReportFolder) -> None:
+    def _write_trajectories(self, report: ReportFolder, standard: FinalMap) -> None:
         """TUM files for evo: the standard map's vertices, and the ground truth when known."""
-        standard = self.session.maps[MapMode.STANDARD].snapshot()
-        order = np.argsort(standard.vertex_time, kind="stable")
-        times = standard.vertex_time[order]
-        self._write_tum(report, "trajectory_tum.txt", times, standard.poses[order])
-        truth = self.session.vertex_ground_truth(self.session.maps[MapMode.STANDARD])
-        if truth is not None:
-            self._write_tum(report, "groundtruth_tum.txt", times, truth[order])
+        snap = standard.snapshot
+        order = np.argsort(snap.vertex_time, kind="stable")
+        times = snap.vertex_time[order]
+        self._write_tum(report, "trajectory_tum.txt", times, snap.poses[order])
+        if standard.truth is not None:
+            self._write_tum(report, "groundtruth_tum.txt", times, standard.truth[order])
 
     @staticmethod
     def _write_tum(report: ReportFolder, name: str, times: np.ndarray, poses: np.ndarray) -> None:
@@ -511,18 +573,21 @@ class HeadlessPipeline:
                 )
 
     def _write_figures(
-        self, report: ReportFolder, end_time: float, summary: dict[str, Any]
+        self,
+        report: ReportFolder,
+        end_time: float,
+        summary: dict[str, Any],
+        maps: Mapping[MapMode, FinalMap],
     ) -> None:
         histories = {m.value: self.session.maps[m].size_history() for m in MAP_ORDER}
         save_png(size_figure(histories, end_time), report.path("size.png"))
-        snaps = {m.value: self.session.maps[m].snapshot() for m in MAP_ORDER}
+        snaps = {m.value: maps[m].snapshot for m in MAP_ORDER}
         aligned: dict[str, np.ndarray] = {}
         truth_path = None
         if self.session.log.has_ground_truth():
             truth_path = np.asarray(self.session.log.ground_truth)
             for mode in MAP_ORDER:
-                cmap: CognitiveMap = self.session.maps[mode]
-                truth = self.session.vertex_ground_truth(cmap)
+                truth = maps[mode].truth
                 snap = snaps[mode.value]
                 if truth is not None and len(truth):
                     tf = align_rigid_2d(snap.poses, truth)

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from cogmap_core.cognitive_map import MapMode
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import MazeConfig, generate_maze_bag, open_bag
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.evaluation import absolute_trajectory_error
 from cogmap_core.g2o import read_g2o
+from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.slam import SlamSession
 from tests.test_faults import one_line_error
 
@@ -189,6 +190,21 @@ BAD_PARAMETERS: list[tuple[list[str], list[str]]] = [
     (["--param", "gate_heading=x"], ["gate_heading='x': the value is not a number"]),
     (["--param", "gate_position=-1"], ["gate_position=-1.0 is out of range"]),
 ]
+
+
+def test_the_report_copies_each_map_once(
+    maze_bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    taken: list[MapMode] = []
+    snapshot = CognitiveMap.snapshot
+
+    def counted(cmap: CognitiveMap) -> MapSnapshot:
+        taken.append(cmap.mode)
+        return snapshot(cmap)
+
+    monkeypatch.setattr(CognitiveMap, "snapshot", counted)
+    assert main(["run", str(maze_bag), "--out", str(tmp_path / "report")]) == 0
+    assert sorted(taken) == sorted(MapMode)  # summary, trajectories and figures share them
 
 
 @pytest.mark.parametrize(
