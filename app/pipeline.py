@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from app.plots import map_figure, save_png, size_figure
 from app.report import ReportFolder
+from cogmap_core import __version__
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
@@ -33,6 +34,7 @@ from cogmap_core.evaluation import (
     align_rigid_2d,
     layout_fidelity,
 )
+from cogmap_core.event_file import save_event_file
 from cogmap_core.fileio import check_output_file, output_error
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
@@ -79,6 +81,8 @@ class RunOptions:
         save_session: write the session to this file at the end of the data (before the final
             optimisation, so that a resumed run continues exactly where this one stopped; bags
             only).
+        save_events: write the map events of the run (the front end's, or a log's) to this
+            event file at the end of the data, as ``cogmap sweep`` records and reads them.
 
     """
 
@@ -93,6 +97,7 @@ class RunOptions:
     resume: Path | None = None
     param_changes: Mapping[str, float] = field(default_factory=dict)
     save_session: Path | None = None
+    save_events: Path | None = None
 
 
 @dataclass
@@ -389,6 +394,8 @@ class HeadlessPipeline:
             )
         if options.save_session is not None:
             check_output_file(options.save_session, "--save-session", options.force)
+        if options.save_events is not None:
+            check_output_file(options.save_events, "--save-events", options.force)
         self.meta: SessionMeta | None = None
         self.session: SlamSession  # set by run(), once the output folder is checked
 
@@ -441,6 +448,8 @@ class HeadlessPipeline:
                 self._save_session(self.options.save_session)
             self.session.finish()
             wall = wallclock.perf_counter() - started
+            if self.options.save_events is not None:
+                self._save_events(self.options.save_events)
             maps = final_maps(self.session)
             summary = self._summary(reader, first, last, wall, maps)
             self._announce(f"writing the report to {report.out_dir}")
@@ -502,6 +511,22 @@ class HeadlessPipeline:
             f"session saved to {path} ({path.stat().st_size / 1e6:.1f} MB) in "
             f"{wallclock.perf_counter() - started:.2f} s: "
             f"{session_description(self.meta, self.session)}"
+        )
+
+    def _save_events(self, path: Path) -> None:
+        """Write the session's events with their frames and ground truth as an event file."""
+        frontend = {} if self.frontend is None else self.frontend.to_dict()
+        recording = self.session.log.recording(str(self.bag), frontend)
+        recording.meta["recorded_by"] = f"cogmap {__version__} run"
+        if self.frontend is not None:
+            recording.meta["topics"] = asdict(self.options.topics or BagTopics())
+            recording.meta["image_scale"] = self.options.image_scale
+        try:
+            save_event_file(path, recording)
+        except OSError as exc:  # the disk filled up or went read-only during the run
+            raise output_error(path, exc) from None
+        self.session_notes.append(
+            f"events saved to {path}: {len(recording.events)} events of {recording.frames} frames"
         )
 
     def _summary(
