@@ -46,6 +46,7 @@ def _run(args: argparse.Namespace) -> int:
         resume=None if args.resume is None else Path(args.resume),
         param_changes=changes,
         save_session=None if args.save_session is None else Path(args.save_session),
+        save_events=None if args.save_events is None else Path(args.save_events),
     )
     bar = ProgressBar("cogmap run")
 
@@ -85,7 +86,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="write into a non-empty DIR: replaces only the report's own files (listed in "
         "DIR/.cogmap-report), once the new report is complete; nothing else in DIR is touched; "
-        "also replaces an existing --save-session FILE",
+        "also replaces an existing --save-session or --save-events FILE",
     )
     add_input_arguments(parser)
     parser.add_argument(
@@ -107,6 +108,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         metavar="FILE",
         help="bags: save the whole SLAM state at the end of the data, to continue it later with "
         "--resume (see docs/sessions.md)",
+    )
+    parser.add_argument(
+        "--save-events",
+        default=None,
+        metavar="FILE",
+        help="save the map events of the run (the front end's) at the end of the data as an "
+        "event file (.events.npz), which cogmap sweep takes instead of a bag",
     )
     parser.add_argument(
         "--resume",

@@ -18,18 +18,27 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
+from numpy.typing import NDArray
 
 from app.plots import map_figure, save_png, size_figure
 from app.report import ReportFolder
+from cogmap_core import __version__
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError, InputFileError, OutputError, ParameterError
-from cogmap_core.evaluation import LAYOUT_RADIUS, align_rigid_2d
-from cogmap_core.fileio import check_writable, output_error
-from cogmap_core.frames import Frame
+from cogmap_core.errors import CogmapError, InputFileError, ParameterError
+from cogmap_core.evaluation import (
+    LAYOUT_RADIUS,
+    LayoutFidelity,
+    absolute_trajectory_error,
+    align_rigid_2d,
+    layout_fidelity,
+)
+from cogmap_core.event_file import save_event_file
+from cogmap_core.fileio import check_output_file, output_error
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
+from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
@@ -72,6 +81,8 @@ class RunOptions:
         save_session: write the session to this file at the end of the data (before the final
             optimisation, so that a resumed run continues exactly where this one stopped; bags
             only).
+        save_events: write the map events of the run (the front end's, or a log's) to this
+            event file at the end of the data, as ``cogmap sweep`` records and reads them.
 
     """
 
@@ -86,6 +97,7 @@ class RunOptions:
     resume: Path | None = None
     param_changes: Mapping[str, float] = field(default_factory=dict)
     save_session: Path | None = None
+    save_events: Path | None = None
 
 
 @dataclass
@@ -135,6 +147,47 @@ class RunResult:
         return "\n".join(lines)
 
 
+@dataclass(frozen=True, slots=True)
+class FinalMap:
+    """One map as the report sees it: copied once (a snapshot), with its vertices' ground truth.
+
+    Attributes:
+        cmap: the map itself (its counters, optimisations and size history).
+        snapshot: a copy of its live vertices and edges.
+        truth: the ground-truth pose at each live vertex's creation time (rows of
+            ``snapshot``), or None without ground truth.
+
+    """
+
+    cmap: CognitiveMap
+    snapshot: MapSnapshot
+    truth: NDArray[np.float64] | None
+
+    def ate(self) -> float | None:
+        """RMSE of the vertex positions against ground truth after rigid alignment (m)."""
+        if self.cmap.num_vertices == 0 or self.truth is None:
+            return None
+        return absolute_trajectory_error(self.snapshot.poses, self.truth)
+
+    def layout_fidelity(self, session: SlamSession, radius: float) -> LayoutFidelity | None:
+        """Completeness and correctness against the session's dense true path (None without)."""
+        if self.truth is None:
+            return None
+        snap = self.snapshot
+        dense_truth = np.asarray(session.log.ground_truth)
+        return layout_fidelity(snap.poses, self.truth, *snap.edge_ends(), dense_truth, radius)
+
+
+def final_maps(session: SlamSession) -> dict[MapMode, FinalMap]:
+    """Every map of ``session`` copied once, for everything a report computes and writes."""
+    maps = {}
+    for mode in MAP_ORDER:
+        cmap = session.maps[mode]
+        snapshot = cmap.snapshot()
+        maps[mode] = FinalMap(cmap, snapshot, session.log.truth_at(snapshot.vertex_time))
+    return maps
+
+
 def session_summary(
     session: SlamSession,
     dataset: str,
@@ -144,6 +197,7 @@ def session_summary(
     read_warnings: dict[str, Any],
     layout_radius: float | None = None,
     source: dict[str, Any] | None = None,
+    maps: Mapping[MapMode, FinalMap] | None = None,
 ) -> dict[str, Any]:
     """The ``summary.json`` of a session: per map sizes, fidelity, accuracy, timings; links.
 
@@ -158,19 +212,23 @@ def session_summary(
             session's (:attr:`SlamSession.evaluation`).
         source: what the input is and how it was read (``format``, a log's settings and what
             became of its loop candidates).
+        maps: the session's maps as :func:`final_maps` copied them (default: copied here).
 
     """
     judging = session.evaluation
     if layout_radius is None:
         layout_radius = judging.layout_radius
     duration = max(last - first, 0.0)
-    maps: dict[str, Any] = {}
+    if maps is None:
+        maps = final_maps(session)
+    entries: dict[str, Any] = {}
     for mode in MAP_ORDER:
-        cmap = session.maps[mode]
+        final = maps[mode]
+        cmap = final.cmap
         entry: dict[str, Any] = optimisation_summary(cmap)
-        ate = session.ate(cmap)
+        ate = final.ate()
         entry["ate_m"] = None if ate is None else round(ate, 6)
-        fidelity = session.layout_fidelity(cmap, layout_radius)
+        fidelity = final.layout_fidelity(session, layout_radius)
         entry["edges_per_vertex"] = (
             round(cmap.num_edges / cmap.num_vertices, 4) if cmap.num_vertices else None
         )
@@ -183,7 +241,7 @@ def session_summary(
         entry["short_edges_removed"] = c.short_edges
         entry["duplicate_links"] = c.duplicate_links
         entry["refused_relocalisations"] = c.refused_relocalisations
-        maps[mode.value] = entry
+        entries[mode.value] = entry
     score = session.loop_closure_score()
     links = session.log.link_table()
     if score is None:
@@ -226,7 +284,7 @@ def session_summary(
         },
         "layout_radius_m": layout_radius,
         "dead_reckoning_ate_m": None if dead_reckoning is None else round(dead_reckoning, 6),
-        "maps": maps,
+        "maps": entries,
         "loop_closures": loops,
         "read_warnings": read_warnings,
         "source": dict(source or {}),
@@ -335,7 +393,9 @@ class HeadlessPipeline:
                 f"recognition ({self.format}): run it whole, without {flag}"
             )
         if options.save_session is not None:
-            check_session_target(options.save_session, options.force)
+            check_output_file(options.save_session, "--save-session", options.force)
+        if options.save_events is not None:
+            check_output_file(options.save_events, "--save-events", options.force)
         self.meta: SessionMeta | None = None
         self.session: SlamSession  # set by run(), once the output folder is checked
 
@@ -388,15 +448,18 @@ class HeadlessPipeline:
                 self._save_session(self.options.save_session)
             self.session.finish()
             wall = wallclock.perf_counter() - started
-            summary = self._summary(reader, first, last, wall)
+            if self.options.save_events is not None:
+                self._save_events(self.options.save_events)
+            maps = final_maps(self.session)
+            summary = self._summary(reader, first, last, wall, maps)
             self._announce(f"writing the report to {report.out_dir}")
             with report.writing():
                 self._write_config(report)
                 self._write_summary(report, summary)
                 self._write_sizes(report)
                 self._write_maps(report)
-                self._write_trajectories(report)
-                self._write_figures(report, last, summary)
+                self._write_trajectories(report, maps[MapMode.STANDARD])
+                self._write_figures(report, last, summary, maps)
             self.files = report.commit()
         return RunResult(
             summary, report.out_dir, list(self.files), reader.warnings, list(self.session_notes)
@@ -419,21 +482,6 @@ class HeadlessPipeline:
             on_corrupt="stop" if o.until_error else "error",
         )
 
-    def _check_image_size(self, image: np.ndarray) -> None:
-        """Refuse camera images too small for the view template (they would be magnified)."""
-        assert self.frontend is not None
-        min_w, min_h = self.frontend.minimum_image_size()
-        height, width = image.shape[:2]
-        if width < min_w or height < min_h:
-            scale = self.options.image_scale
-            need_w, need_h = self.frontend.minimum_image_size(scale)
-            cfg = self.frontend
-            raise InputFileError(
-                f"{self.bag}: camera images of about {width * scale}x{height * scale} px are too "
-                f"small for the {cfg.template_x_size}x{cfg.template_y_size} view template; "
-                f"use a camera topic with images of at least {need_w}x{need_h} px"
-            )
-
     def _process_frames(self, reader: Source, offset: float = 0.0) -> tuple[float, float]:
         """Every frame (or log step) through the session, placed at ``offset`` + its time."""
         first = last = math.nan
@@ -442,8 +490,6 @@ class HeadlessPipeline:
             if offset:
                 frame = replace(frame, time=frame.time + offset)
             if math.isnan(first):
-                if isinstance(frame, Frame):
-                    self._check_image_size(frame.image)
                 first = frame.time
             last = frame.time
             self.session.process(frame)
@@ -467,7 +513,30 @@ class HeadlessPipeline:
             f"{session_description(self.meta, self.session)}"
         )
 
-    def _summary(self, reader: Source, first: float, last: float, wall: float) -> dict[str, Any]:
+    def _save_events(self, path: Path) -> None:
+        """Write the session's events with their frames and ground truth as an event file."""
+        frontend = {} if self.frontend is None else self.frontend.to_dict()
+        recording = self.session.log.recording(str(self.bag), frontend)
+        recording.meta["recorded_by"] = f"cogmap {__version__} run"
+        if self.frontend is not None:
+            recording.meta["topics"] = asdict(self.options.topics or BagTopics())
+            recording.meta["image_scale"] = self.options.image_scale
+        try:
+            save_event_file(path, recording)
+        except OSError as exc:  # the disk filled up or went read-only during the run
+            raise output_error(path, exc) from None
+        self.session_notes.append(
+            f"events saved to {path}: {len(recording.events)} events of {recording.frames} frames"
+        )
+
+    def _summary(
+        self,
+        reader: Source,
+        first: float,
+        last: float,
+        wall: float,
+        maps: Mapping[MapMode, FinalMap],
+    ) -> dict[str, Any]:
         return session_summary(
             self.session,
             str(self.bag),
@@ -476,6 +545,7 @@ class HeadlessPipeline:
             wall,
             read_warnings(reader),
             source=source_description(reader),
+            maps=maps,
         )
 
     @staticmethod
@@ -509,15 +579,14 @@ class HeadlessPipeline:
         for mode in MAP_ORDER:
             write_g2o(self.session.maps[mode].to_pose_graph(), report.path(f"{mode.value}.g2o"))
 
-    def _write_trajectories(self, report: ReportFolder) -> None:
+    def _write_trajectories(self, report: ReportFolder, standard: FinalMap) -> None:
         """TUM files for evo: the standard map's vertices, and the ground truth when known."""
-        standard = self.session.maps[MapMode.STANDARD].snapshot()
-        order = np.argsort(standard.vertex_time, kind="stable")
-        times = standard.vertex_time[order]
-        self._write_tum(report, "trajectory_tum.txt", times, standard.poses[order])
-        truth = self.session.vertex_ground_truth(self.session.maps[MapMode.STANDARD])
-        if truth is not None:
-            self._write_tum(report, "groundtruth_tum.txt", times, truth[order])
+        snap = standard.snapshot
+        order = np.argsort(snap.vertex_time, kind="stable")
+        times = snap.vertex_time[order]
+        self._write_tum(report, "trajectory_tum.txt", times, snap.poses[order])
+        if standard.truth is not None:
+            self._write_tum(report, "groundtruth_tum.txt", times, standard.truth[order])
 
     @staticmethod
     def _write_tum(report: ReportFolder, name: str, times: np.ndarray, poses: np.ndarray) -> None:
@@ -529,18 +598,21 @@ class HeadlessPipeline:
                 )
 
     def _write_figures(
-        self, report: ReportFolder, end_time: float, summary: dict[str, Any]
+        self,
+        report: ReportFolder,
+        end_time: float,
+        summary: dict[str, Any],
+        maps: Mapping[MapMode, FinalMap],
     ) -> None:
         histories = {m.value: self.session.maps[m].size_history() for m in MAP_ORDER}
         save_png(size_figure(histories, end_time), report.path("size.png"))
-        snaps = {m.value: self.session.maps[m].snapshot() for m in MAP_ORDER}
+        snaps = {m.value: maps[m].snapshot for m in MAP_ORDER}
         aligned: dict[str, np.ndarray] = {}
         truth_path = None
         if self.session.log.has_ground_truth():
             truth_path = np.asarray(self.session.log.ground_truth)
             for mode in MAP_ORDER:
-                cmap: CognitiveMap = self.session.maps[mode]
-                truth = self.session.vertex_ground_truth(cmap)
+                truth = maps[mode].truth
                 snap = snaps[mode.value]
                 if truth is not None and len(truth):
                     tf = align_rigid_2d(snap.poses, truth)
@@ -555,20 +627,6 @@ class HeadlessPipeline:
                     f"correctness {entry['correctness']:.3f}"
                 )
         save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
-
-
-def check_session_target(path: Path, force: bool) -> None:
-    """Refuse a session file target that would fail only at the end of a long run."""
-    if path.is_dir():
-        raise OutputError(f"{path} is a directory; give --save-session a file name")
-    if path.exists() and not force:
-        raise OutputError(
-            f"{path} already exists; choose another --save-session file or pass --force to "
-            "overwrite it"
-        )
-    if not path.parent.is_dir():
-        raise OutputError(f"folder {path.parent} of --save-session does not exist; create it")
-    check_writable(path.parent)  # a probe file: mode bits do not stop root
 
 
 def run_headless(

@@ -34,6 +34,7 @@ from cogmap_core.fileio import (
     check_writable,
     describe_os_error,
     interrupts_deferred,
+    output_error,
     partial_name,
     remove_stale,
 )
@@ -115,7 +116,7 @@ class ReportFolder:
             staging.mkdir()
         except OSError as exc:
             self._remove_parents()
-            raise OutputError(f"cannot write in {folder}: {describe_os_error(exc)}") from None
+            raise output_error(folder, exc, "write in") from None
         self.staging = staging
         try:
             check_writable(staging)
@@ -138,7 +139,7 @@ class ReportFolder:
                 continue
             except OSError as exc:
                 self._remove_parents()
-                raise OutputError(f"cannot create {path}: {describe_os_error(exc)}") from None
+                raise output_error(path, exc, "create") from None
             self._created.append(path)
 
     def _remove_parents(self) -> None:

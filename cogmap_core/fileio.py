@@ -8,6 +8,10 @@ mode ``0o666`` minus the umask -- the permissions any other file of the user get
 
 Temporary names carry the writing process's id (``...partial-<pid>``) so that leftovers of a
 killed process can be told from the work of a live one and removed (:func:`remove_stale`).
+
+A command checks its outputs before the work, so that a long run does not fail at its end: a
+single output file named by an option goes through :func:`check_output_file`, a folder through
+:func:`check_writable` (report folders: ``app/report.py``).
 """
 
 from __future__ import annotations
@@ -132,7 +136,29 @@ def check_writable(folder: Path) -> None:
     except OSError as exc:
         with contextlib.suppress(OSError):
             probe.unlink()
-        raise OutputError(f"cannot write in {folder}: {describe_os_error(exc)}") from None
+        raise output_error(folder, exc, "write in") from None
+
+
+def check_output_file(path: Path, option: str, force: bool) -> None:
+    """Refuse a single output file that would fail only at the end of the work.
+
+    The rule of a one-file output named by ``option`` (``--save-session FILE``): a folder in the
+    way is refused, an existing file is replaced only with ``force`` (``--force``), and the file's
+    folder must exist and be writable (a probe file: mode bits do not stop root).
+
+    Raises:
+        OutputError: one line naming the file, the problem and ``option``, and what to do.
+
+    """
+    if path.is_dir():
+        raise OutputError(f"{path} is a directory; give {option} a file name")
+    if path.exists() and not force:
+        raise OutputError(
+            f"{path} already exists; choose another {option} file or pass --force to overwrite it"
+        )
+    if not path.parent.is_dir():
+        raise OutputError(f"folder {path.parent} of {option} does not exist; create it")
+    check_writable(path.parent)
 
 
 @contextlib.contextmanager

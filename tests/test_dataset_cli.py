@@ -138,6 +138,24 @@ def test_make_maze_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert main([*args, "--force"]) == 0
 
 
+@pytest.mark.parametrize("force", [False, True])
+def test_make_maze_refuses_a_folder_as_out_before_writing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], force: bool
+) -> None:
+    layout = tmp_path / "loop.txt"
+    layout.write_text(LOOP)
+    folder = tmp_path / "run.bag"
+    folder.mkdir()
+    (folder / "mine.txt").write_text("mine")
+    args = ["make-maze", str(folder), "--layout", str(layout), "--laps", "1", "--fps", "3"]
+    assert main([*args, "--quiet", *(["--force"] if force else [])]) == 2
+    assert capsys.readouterr().err == (
+        f"cogmap make-maze: error: {folder} is a folder; give the path of the .bag file to write\n"
+    )  # with --force it used to render the whole bag, then fail at the rename
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["loop.txt", "run.bag"]
+    assert [p.name for p in folder.iterdir()] == ["mine.txt"]
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [

@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 
 from app.cli import main
-from cogmap_core.cognitive_map import MapMode
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import MazeConfig, generate_maze_bag, open_bag
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.evaluation import absolute_trajectory_error
+from cogmap_core.event_file import load_event_file
 from cogmap_core.g2o import read_g2o
+from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.slam import SlamSession
 from tests.test_faults import one_line_error
 
@@ -189,6 +191,46 @@ BAD_PARAMETERS: list[tuple[list[str], list[str]]] = [
     (["--param", "gate_heading=x"], ["gate_heading='x': the value is not a number"]),
     (["--param", "gate_position=-1"], ["gate_position=-1.0 is out of range"]),
 ]
+
+
+def test_saved_events_are_the_front_ends(
+    maze_bag: Path, tmp_path: Path, reference: SlamSession, capsys: pytest.CaptureFixture[str]
+) -> None:
+    events = tmp_path / "figure8.events.npz"
+    out = tmp_path / "report"
+    assert main(["run", str(maze_bag), "--out", str(out), "--save-events", str(events)]) == 0
+    frames = reference.log.frames
+    said = f"events saved to {events}: {reference.log.event_count} events of {frames} frames"
+    assert said in capsys.readouterr().out.splitlines()
+    saved = load_event_file(events)
+    expected = reference.log.recording()  # what cogmap sweep records and caches for this bag
+    assert saved.events == expected.events
+    assert np.array_equal(saved.frame_end, expected.frame_end)
+    assert np.array_equal(saved.frame_time, expected.frame_time)
+    assert saved.ground_truth is not None and expected.ground_truth is not None
+    assert np.array_equal(saved.ground_truth, expected.ground_truth)
+    assert saved.source == str(maze_bag)
+    assert saved.frontend == frontend_config_for(maze_bag).to_dict()
+    assert (saved.meta["image_scale"], saved.meta["topics"]["image"]) == (
+        4,
+        "/irat_red/camera/image/compressed",
+    )
+    assert json.loads((out / "summary.json").read_text())["frames"] == frames
+
+
+def test_the_report_copies_each_map_once(
+    maze_bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    taken: list[MapMode] = []
+    snapshot = CognitiveMap.snapshot
+
+    def counted(cmap: CognitiveMap) -> MapSnapshot:
+        taken.append(cmap.mode)
+        return snapshot(cmap)
+
+    monkeypatch.setattr(CognitiveMap, "snapshot", counted)
+    assert main(["run", str(maze_bag), "--out", str(tmp_path / "report")]) == 0
+    assert sorted(taken) == sorted(MapMode)  # summary, trajectories and figures share them
 
 
 @pytest.mark.parametrize(

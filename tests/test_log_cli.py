@@ -11,6 +11,7 @@ import pytest
 
 from app.cli import main
 from cogmap_core.cognitive_map import MapMode
+from cogmap_core.event_file import load_event_file
 from cogmap_core.slam import SlamSession
 from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
@@ -101,6 +102,19 @@ def test_report_of_a_log(report: Path, square_log: Path) -> None:
     assert config["map"] == LOG_MAP_PARAMS.to_dict()
     gt = np.loadtxt(report / "groundtruth_tum.txt")
     assert gt.shape == (standard["vertices"], 8)
+
+
+def test_a_logs_events_can_be_saved(square_log: Path, tmp_path: Path) -> None:
+    events = tmp_path / "square.events.npz"
+    assert (
+        main(["run", str(square_log), "--out", str(tmp_path / "r"), "--save-events", str(events)])
+        == 0
+    )
+    reference = SlamSession(LOG_MAP_PARAMS, evaluation=open_source(square_log).evaluation)
+    reference.run(open_source(square_log).frames())
+    saved = load_event_file(events)
+    assert saved.events == list(reference.log.events)
+    assert saved.frames == reference.log.frames and saved.frontend == {}
 
 
 def test_settings_from_the_command_line(square_log: Path, tmp_path: Path, capsys) -> None:

@@ -357,6 +357,34 @@ def test_existing_session_target_needs_force(
     assert "does not exist" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("option", ["--save-session", "--save-events"])
+@pytest.mark.parametrize("case", ["folder", "existing", "no folder"])
+def test_session_target_refused_before_the_run(
+    days: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    case: str,
+    option: str,
+) -> None:
+    day1, _ = days
+    target = tmp_path / "s.npz"
+    if case == "folder":
+        target.mkdir()
+        expected = f"{target} is a directory; give {option} a file name"
+    elif case == "existing":
+        target.write_bytes(b"mine")
+        expected = (
+            f"{target} already exists; choose another {option} file or pass --force to overwrite it"
+        )
+    else:
+        target = tmp_path / "no" / "s.npz"
+        expected = f"folder {target.parent} of {option} does not exist; create it"
+    out = tmp_path / "r"
+    assert main(["run", str(day1), "--out", str(out), option, str(target)]) == 2
+    assert capsys.readouterr().err == f"cogmap run: error: {expected}\n"
+    assert not out.exists()
+
+
 def test_missing_session_file(
     days: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -74,11 +74,14 @@ class IratBagWriter:
         """Prepare to write ``path`` (created under a temporary name until :meth:`close`).
 
         Raises:
-            BagError: the target exists and ``overwrite`` is false, or it cannot be created.
+            BagError: the target is a folder, exists and ``overwrite`` is false, or cannot be
+                created.
 
         """
         self.path = Path(path)
         self.topics = topics or BagTopics()
+        if self.path.is_dir():  # would fail only at the rename, after all the writing
+            raise BagError(f"{self.path} is a folder; give the path of the .bag file to write")
         if self.path.exists() and not overwrite:
             raise BagError(
                 f"{self.path} already exists; choose another name or overwrite it (--force)"
