@@ -36,6 +36,7 @@ from cogmap_core.evaluation import (
 )
 from cogmap_core.event_file import save_event_file
 from cogmap_core.fileio import check_output_file, output_error
+from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
 from cogmap_core.map_graph import MapSnapshot
@@ -482,6 +483,21 @@ class HeadlessPipeline:
             on_corrupt="stop" if o.until_error else "error",
         )
 
+    def _check_image_size(self, image: np.ndarray) -> None:
+        """Refuse camera images too small for the view template (they would be magnified)."""
+        assert self.frontend is not None
+        min_w, min_h = self.frontend.minimum_image_size()
+        height, width = image.shape[:2]
+        if width < min_w or height < min_h:
+            scale = self.options.image_scale
+            need_w, need_h = self.frontend.minimum_image_size(scale)
+            cfg = self.frontend
+            raise InputFileError(
+                f"{self.bag}: camera images of about {width * scale}x{height * scale} px are too "
+                f"small for the {cfg.template_x_size}x{cfg.template_y_size} view template; "
+                f"use a camera topic with images of at least {need_w}x{need_h} px"
+            )
+
     def _process_frames(self, reader: Source, offset: float = 0.0) -> tuple[float, float]:
         """Every frame (or log step) through the session, placed at ``offset`` + its time."""
         first = last = math.nan
@@ -490,6 +506,8 @@ class HeadlessPipeline:
             if offset:
                 frame = replace(frame, time=frame.time + offset)
             if math.isnan(first):
+                if isinstance(frame, Frame):
+                    self._check_image_size(frame.image)
                 first = frame.time
             last = frame.time
             self.session.process(frame)

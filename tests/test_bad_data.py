@@ -209,9 +209,9 @@ def test_cogmap_run_skips_corrupt_jpegs_and_refuses_tiny_images(tmp_path: Path, 
     path = write_bag(tmp_path / "tiny.bag", tiny, odom)
     out = tmp_path / "tiny-out"
     assert main(["run", str(path), "--out", str(out)]) == 2
-    assert one_line_error(capsys.readouterr().err) == (  # 8x8 px decoded at 1/4
-        "cogmap run: error: camera images of 2x2 px (as decoded) are too small for the 60x20 "
-        "view template: their crop is 2x1.25 px; images must be at least 60x32 px as decoded"
+    assert one_line_error(capsys.readouterr().err) == (
+        f"cogmap run: error: {path}: camera images of about 8x8 px are too small for the 60x20 "
+        "view template; use a camera topic with images of at least 240x128 px"
     )
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == [
         "cj.bag",
