@@ -16,6 +16,7 @@ import sys
 import threading
 from collections.abc import Callable, Sequence
 from types import FrameType
+from typing import NoReturn
 
 from cogmap_core import __version__
 from cogmap_core.errors import CogmapError
@@ -51,9 +52,23 @@ COMMAND_MODULES: tuple[str, ...] = (
 )
 
 
+class CommandLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line: the command, the problem, the help.
+
+    argparse prints the usage block and then the error; this prints only
+    ``cogmap run: error: the following arguments are required: --out; see cogmap run --help``
+    (exit code 2). Sub-command parsers are of this class too (argparse makes them of the class of
+    their parent).
+    """
+
+    def error(self, message: str) -> NoReturn:
+        """Print the one-line usage error and exit with code 2."""
+        self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every available sub-command."""
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog="cogmap",
         description="Brain-inspired compact cognitive maps: SLAM on iRat-layout bags, "
         "pose-graph optimisation, synthetic rat mazes and a live web app.",
@@ -74,7 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``cogmap`` command line; return the process exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:  # named after the sub-command they were given to, not the top-level parser
+        command = f"cogmap {args.command}" if getattr(args, "command", None) else "cogmap"
+        print(
+            f"{command}: error: unrecognized arguments: {' '.join(unknown)}; see {command} --help",
+            file=sys.stderr,
+        )
+        return 2
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
