@@ -505,6 +505,7 @@ def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
     )
     cmap.refused = _load_records(arrays, prefix + "refused.", RelocalisationCheck)  # type: ignore[assignment]
     cmap.counters = MapCounters(**s["counters"])
+    _check_counters(cmap, prefix)
     robot = s["robot"]
     cmap._current = int(robot["current"])
     cmap._accum = [float(v) for v in robot["accum"]]
@@ -519,6 +520,22 @@ def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
     cmap._hist_vertices = arrays[prefix + "size_history.vertices"].tolist()
     cmap._hist_edges = arrays[prefix + "size_history.edges"].tolist()
     return cmap
+
+
+def _check_counters(cmap: CognitiveMap, prefix: str) -> None:
+    """Refuse counters that do not add up with the loaded graph (they are shown, never derived).
+
+    Every proposal made an id; every id that is not a live vertex was declined, integrated or
+    removed as a short edge; every refused relocalisation is on record.
+    """
+    counters, graph = cmap.counters, cmap.graph
+    removed = counters.declined + counters.integrated + counters.short_edges
+    if (
+        counters.proposed != graph.num_ids
+        or removed != graph.num_ids - graph.num_vertices
+        or counters.refused_relocalisations != len(cmap.refused)
+    ):
+        raise SessionError(f"{prefix}counters do not match the graph")
 
 
 def _graph_array(

@@ -309,6 +309,24 @@ def test_another_format_version_is_refused(
     assert len(err.splitlines()) == 1 and not out.exists()
 
 
+@pytest.mark.parametrize("counter", ["proposed", "integrated", "refused_relocalisations"])
+def test_counters_that_do_not_add_up_are_refused(
+    counter: str, resumed: Path, tmp_path: Path
+) -> None:
+    """The counters are shown as they were saved: a file whose counters contradict its graph."""
+    session = resumed / "day1.session.npz"
+    load_session(session)  # the intact file loads
+    with np.load(session) as data:
+        header = json.loads(str(data["header"]))
+    header["state"]["maps"]["scene_integration"]["counters"][counter] += 1
+    edited = rewrite_npz(session, tmp_path / "edited.npz", header=json.dumps(header))
+    with pytest.raises(SessionError) as refused:
+        load_session(edited)
+    assert str(refused.value) == (
+        f"{edited}: map.scene_integration.counters do not match the graph"
+    )
+
+
 @pytest.mark.parametrize("damage", ["truncate", "flip", "empty", "drop_array"])
 def test_truncated_or_corrupt_files_are_refused_and_nothing_is_written(
     damage: str,
