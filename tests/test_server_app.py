@@ -740,6 +740,27 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
         np.testing.assert_array_equal(app._false_times, false_times)
 
 
+def test_views_follow_the_maps_without_holding_the_replay_lock(
+    short_bag: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The per-frame update refreshes each view outside the replay lock (views take it briefly)."""
+    with running_app(short_bag) as app:
+        wait(app)
+        with client(app.server.get_port()):
+            until(lambda: len(app.views) == 1)
+            wait(app)
+            free: list[bool] = []
+            real = view_module.ClientView.refresh
+
+            def refresh(view: view_module.ClientView) -> None:
+                free.append(_lock_is_free(app.replay.lock))
+                real(view)
+
+            monkeypatch.setattr(view_module.ClientView, "refresh", refresh)
+            app.on_maps(app.replay, ALL_MODES, forced=True)
+        assert free == [True]
+
+
 def test_html_replay_checks_its_folder_before_rendering(
     short_bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

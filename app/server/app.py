@@ -816,12 +816,12 @@ class CogmapApp:
             self._publish_scene()
             if self._chart_limit.due(forced):
                 self._update_chart()
-            if self._views_limit.due(forced):
-                for view in list(self.views.values()):
-                    try:
-                        view.refresh()
-                    except Exception:  # a tab that went away must not stop the others
-                        traceback.print_exc()
+        if self._views_limit.due(forced):  # each view takes the replay lock for what it reads
+            for view in list(self.views.values()):
+                try:
+                    view.refresh()
+                except Exception:  # a tab that went away must not stop the others
+                    traceback.print_exc()
         self._update_status()
 
     # ------------------------------------------------------------------ page content
