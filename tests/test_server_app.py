@@ -7,6 +7,7 @@ the same bag, and compared exactly.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import csv
 import html
 import io
@@ -14,7 +15,7 @@ import json
 import threading
 import time
 import urllib.request
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import msgspec
@@ -697,42 +698,49 @@ def _lock_is_free(lock: threading.RLock) -> bool:
     return taken[0]
 
 
-def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
-    short_bag: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    with running_app(short_bag) as app:
+@contextlib.contextmanager
+def _idle_app_with_one_viewer(bag: Path) -> Iterator[CogmapApp]:
+    """The app at the end of ``bag``, with one connected viewer, all work done."""
+    with running_app(bag) as app:
         wait(app)
         with client(app.server.get_port()):
             until(lambda: len(app.views) == 1)
             wait(app)
-            figures, false_times = dict(app._figures), app._false_times.copy()
-            assert len(figures) == len(ALL_MODES)
-            free: list[tuple[str, bool]] = []
+            yield app
 
-            def spy(name: str, real: Callable[..., object]) -> Callable[..., object]:
-                def call(*args: object, **kwargs: object) -> object:
-                    free.append((name, _lock_is_free(app.replay.lock)))
-                    return real(*args, **kwargs)
 
-                return call
+def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
+    short_bag: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with _idle_app_with_one_viewer(short_bag) as app:
+        figures, false_times = dict(app._figures), app._false_times.copy()
+        assert len(figures) == len(ALL_MODES)
+        free: list[tuple[str, bool]] = []
 
-            monkeypatch.setattr(
-                app_module, "false_link_times", spy("false links", app_module.false_link_times)
-            )
-            monkeypatch.setattr(
-                app_module, "compute_figures", spy("figures", app_module.compute_figures)
-            )
-            monkeypatch.setattr(
-                view_module.ClientView, "refresh", spy("view", view_module.ClientView.refresh)
-            )
-            updates = app.streamer.stats.updates
-            with app.replay.lock:  # forget the figures: the next round computes them all again
-                app._false_key = None
-                app._figures_key.clear()
-            app._update_figures(True, ALL_MODES)
-            wait(app)
-            # the replay has ended: only the figures' round publishes the scene
-            assert app.streamer.stats.updates == updates + 1
+        def spy(name: str, real: Callable[..., object]) -> Callable[..., object]:
+            def call(*args: object, **kwargs: object) -> object:
+                free.append((name, _lock_is_free(app.replay.lock)))
+                return real(*args, **kwargs)
+
+            return call
+
+        monkeypatch.setattr(
+            app_module, "false_link_times", spy("false links", app_module.false_link_times)
+        )
+        monkeypatch.setattr(
+            app_module, "compute_figures", spy("figures", app_module.compute_figures)
+        )
+        monkeypatch.setattr(
+            view_module.ClientView, "refresh", spy("view", view_module.ClientView.refresh)
+        )
+        updates = app.streamer.stats.updates
+        with app.replay.lock:  # forget the figures: the next round computes them all again
+            app._false_key = None
+            app._figures_key.clear()
+        app._update_figures(True, ALL_MODES)
+        wait(app)
+        # the replay has ended: only the figures' round publishes the scene
+        assert app.streamer.stats.updates == updates + 1
         assert free == [("false links", True)] + [("figures", True)] * len(ALL_MODES) + [
             ("view", True)
         ]
@@ -744,20 +752,16 @@ def test_views_follow_the_maps_without_holding_the_replay_lock(
     short_bag: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The per-frame update refreshes each view outside the replay lock (views take it briefly)."""
-    with running_app(short_bag) as app:
-        wait(app)
-        with client(app.server.get_port()):
-            until(lambda: len(app.views) == 1)
-            wait(app)
-            free: list[bool] = []
-            real = view_module.ClientView.refresh
+    with _idle_app_with_one_viewer(short_bag) as app:
+        free: list[bool] = []
+        real = view_module.ClientView.refresh
 
-            def refresh(view: view_module.ClientView) -> None:
-                free.append(_lock_is_free(app.replay.lock))
-                real(view)
+        def refresh(view: view_module.ClientView) -> None:
+            free.append(_lock_is_free(app.replay.lock))
+            real(view)
 
-            monkeypatch.setattr(view_module.ClientView, "refresh", refresh)
-            app.on_maps(app.replay, ALL_MODES, forced=True)
+        monkeypatch.setattr(view_module.ClientView, "refresh", refresh)
+        app.on_maps(app.replay, ALL_MODES, forced=True)
         assert free == [True]
 
 
