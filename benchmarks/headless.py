@@ -15,8 +15,8 @@ Runs ``cogmap run`` (default dataset, paper parameters) in a child process, then
 - clustering pays off: optimisations and optimisation time against one optimisation per
   loop-closure edge (the maps rebuilt from the cached front-end events with T_interval -> 0).
 
-The front end runs once: when the event cache (``$COGMAP_CACHE/events``, which sweeps fill)
-does not hold the bag's events yet, ``cogmap run --save-events`` writes them there.
+The front end runs once: the benchmarked ``cogmap run`` saves its events (``--save-events``, into
+a temporary folder, never the shared event cache) and the per-edge comparison replays them.
 
 Usage: ``python benchmarks/headless.py [--out DIR] [--per-edge-seconds S]``
 """
@@ -35,14 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-from app.sweep import bag_source, cached_bag_events, shared_events_dir
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagTopics
 from cogmap_core.datasets.cache import DEFAULT_CONFIG, default_dataset_path
 from cogmap_core.datasets.generator import plan_dataset
-from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.event_file import KIND_LINK
+from cogmap_core.event_file import KIND_LINK, load_event_file
 from cogmap_core.slam import EventLog
 
 
@@ -66,18 +63,17 @@ def lap_growth(sizes: Path, lap_times: tuple[float, ...]) -> dict[str, float]:
     return growth
 
 
-def cached_events_file(bag: Path) -> Path:
-    """Where :func:`~app.sweep.cached_bag_events` keeps the bag's front-end events."""
-    return shared_events_dir() / bag_source(bag, frontend_config_for(bag), BagTopics()).events_name
-
-
-def per_edge_optimisation(bag: Path, seconds: float) -> list[tuple[str, int, float, int, float]]:
+def per_edge_optimisation(
+    events_file: Path, seconds: float
+) -> list[tuple[str, int, float, int, float]]:
     """Clustered vs one-optimisation-per-loop-edge on the first ``seconds`` of data.
+
+    ``events_file``: the front end's events, as the benchmarked run saved them.
 
     Returns rows (map, clustered optimisations, clustered optimise s, per-edge optimisations,
     per-edge optimise s).
     """
-    full = EventLog.from_recording(cached_bag_events(bag, print))
+    full = EventLog.from_recording(load_event_file(events_file))
     log = full.truncated(int(np.searchsorted(full.frame_time, seconds, side="right")))
     events = log.events
     rows = []
@@ -107,11 +103,10 @@ def main() -> None:
     args = parser.parse_args()
     bag = default_dataset_path()
     out = args.out or Path(tempfile.mkdtemp(prefix="cogmap-bench-")) / "run"
+    # the run's own front-end pass gives the events of the per-edge comparison
+    events = Path(tempfile.mkdtemp(prefix="cogmap-bench-events-")) / "run.events.npz"
     command = [sys.executable, "-m", "app", "run", str(bag), "--out", str(out), "--force"]
-    events = cached_events_file(bag)
-    if not events.exists():  # the run's front-end pass fills the cache for per_edge_optimisation
-        events.parent.mkdir(parents=True, exist_ok=True)
-        command += ["--save-events", str(events)]
+    command += ["--save-events", str(events)]
     started = time.perf_counter()
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     elapsed = time.perf_counter() - started
@@ -189,7 +184,7 @@ def main() -> None:
         "clustering against one optimisation per loop-closure edge "
         f"(first {args.per_edge_seconds:.0f} s):"
     )
-    for name, n_c, t_c, n_e, t_e in per_edge_optimisation(bag, args.per_edge_seconds):
+    for name, n_c, t_c, n_e, t_e in per_edge_optimisation(events, args.per_edge_seconds):
         print(
             f"  {name:18} clustered {n_c:4d} optimisations {t_c:7.2f} s | per edge {n_e:5d} "
             f"optimisations {t_e:7.2f} s | ratio count {n_c / max(n_e, 1):.3f} "
