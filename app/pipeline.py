@@ -29,10 +29,8 @@ from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError, ParameterError
 from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
-    LayoutFidelity,
-    absolute_trajectory_error,
-    align_rigid_2d,
-    layout_fidelity,
+    MapAccuracy,
+    map_accuracy,
 )
 from cogmap_core.event_file import save_event_file
 from cogmap_core.fileio import check_output_file, output_error
@@ -150,42 +148,38 @@ class RunResult:
 
 @dataclass(frozen=True, slots=True)
 class FinalMap:
-    """One map as the report sees it: copied once (a snapshot), with its vertices' ground truth.
+    """One map as the report sees it: copied once (a snapshot), with its accuracy.
 
     Attributes:
         cmap: the map itself (its counters, optimisations and size history).
         snapshot: a copy of its live vertices and edges.
         truth: the ground-truth pose at each live vertex's creation time (rows of
             ``snapshot``), or None without ground truth.
+        accuracy: its ATE, layout fidelity (at the session's radius) and alignment to the
+            truth, or None without ground truth.
 
     """
 
     cmap: CognitiveMap
     snapshot: MapSnapshot
     truth: NDArray[np.float64] | None
-
-    def ate(self) -> float | None:
-        """RMSE of the vertex positions against ground truth after rigid alignment (m)."""
-        if self.cmap.num_vertices == 0 or self.truth is None:
-            return None
-        return absolute_trajectory_error(self.snapshot.poses, self.truth)
-
-    def layout_fidelity(self, session: SlamSession, radius: float) -> LayoutFidelity | None:
-        """Completeness and correctness against the session's dense true path (None without)."""
-        if self.truth is None:
-            return None
-        snap = self.snapshot
-        dense_truth = np.asarray(session.log.ground_truth)
-        return layout_fidelity(snap.poses, self.truth, *snap.edge_ends(), dense_truth, radius)
+    accuracy: MapAccuracy | None
 
 
 def final_maps(session: SlamSession) -> dict[MapMode, FinalMap]:
-    """Every map of ``session`` copied once, for everything a report computes and writes."""
+    """Every map of ``session`` copied once, with everything a report computes from it."""
+    radius = session.evaluation.layout_radius
+    log = session.log
+    path = np.asarray(log.ground_truth) if log.has_ground_truth() else None
     maps = {}
     for mode in MAP_ORDER:
         cmap = session.maps[mode]
         snapshot = cmap.snapshot()
-        maps[mode] = FinalMap(cmap, snapshot, session.log.truth_at(snapshot.vertex_time))
+        truth = log.truth_at(snapshot.vertex_time)
+        accuracy = None
+        if truth is not None and path is not None:
+            accuracy = map_accuracy(snapshot.poses, truth, *snapshot.edge_ends(), path, radius)
+        maps[mode] = FinalMap(cmap, snapshot, truth, accuracy)
     return maps
 
 
@@ -196,7 +190,6 @@ def session_summary(
     last: float,
     wall: float,
     read_warnings: dict[str, Any],
-    layout_radius: float | None = None,
     source: dict[str, Any] | None = None,
     maps: Mapping[MapMode, FinalMap] | None = None,
 ) -> dict[str, Any]:
@@ -209,16 +202,13 @@ def session_summary(
         last: data time of the last frame processed (s).
         wall: wall time the processing took (s).
         read_warnings: the reader's non-zero problem counters.
-        layout_radius: radius of layout completeness and correctness (m); default: the
-            session's (:attr:`SlamSession.evaluation`).
         source: what the input is and how it was read (``format``, a log's settings and what
             became of its loop candidates).
         maps: the session's maps as :func:`final_maps` copied them (default: copied here).
 
     """
     judging = session.evaluation
-    if layout_radius is None:
-        layout_radius = judging.layout_radius
+    layout_radius = judging.layout_radius  # (:attr:`SlamSession.evaluation`)
     duration = max(last - first, 0.0)
     if maps is None:
         maps = final_maps(session)
@@ -227,9 +217,10 @@ def session_summary(
         final = maps[mode]
         cmap = final.cmap
         entry: dict[str, Any] = optimisation_summary(cmap)
-        ate = final.ate()
+        accuracy = final.accuracy
+        ate = None if accuracy is None else accuracy.ate
         entry["ate_m"] = None if ate is None else round(ate, 6)
-        fidelity = final.layout_fidelity(session, layout_radius)
+        fidelity = None if accuracy is None else accuracy.fidelity
         entry["edges_per_vertex"] = (
             round(cmap.num_edges / cmap.num_vertices, 4) if cmap.num_vertices else None
         )
@@ -630,12 +621,11 @@ class HeadlessPipeline:
         if self.session.log.has_ground_truth():
             truth_path = np.asarray(self.session.log.ground_truth)
             for mode in MAP_ORDER:
-                truth = maps[mode].truth
+                accuracy = maps[mode].accuracy
                 snap = snaps[mode.value]
-                if truth is not None and len(truth):
-                    tf = align_rigid_2d(snap.poses, truth)
+                if accuracy is not None and accuracy.alignment is not None:
                     poses = snap.poses.copy()
-                    poses[:, :2] = tf.apply(snap.poses[:, :2])
+                    poses[:, :2] = accuracy.alignment.apply(snap.poses[:, :2])
                     aligned[mode.value] = poses
         notes = {}
         for name, entry in summary["maps"].items():

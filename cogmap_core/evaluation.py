@@ -319,6 +319,48 @@ def layout_fidelity(
 
 
 @dataclass(frozen=True, slots=True)
+class MapAccuracy:
+    """A map against ground truth, as every report of cogmap states it.
+
+    Attributes:
+        ate: RMSE (m) of the vertex positions after the best rigid alignment (None: no vertex).
+        fidelity: completeness and correctness of the layout at the radius.
+        alignment: that rigid alignment, taking map positions onto the truth (None: no vertex).
+
+    """
+
+    ate: float | None
+    fidelity: LayoutFidelity
+    alignment: RigidTransform2D | None
+
+
+def map_accuracy(
+    vertex_positions: FloatArray,
+    vertex_truth: FloatArray,
+    edge_from: NDArray[np.int64],
+    edge_to: NDArray[np.int64],
+    true_path: FloatArray,
+    radius: float = LAYOUT_RADIUS,
+) -> MapAccuracy:
+    """ATE (:func:`absolute_trajectory_error`) and :func:`layout_fidelity` of one map.
+
+    The arguments are those of :func:`layout_fidelity`; the one place where a map's accuracy
+    figures are computed (``cogmap run``'s report, the page, sweeps, benchmarks).
+    """
+    fidelity = layout_fidelity(
+        vertex_positions, vertex_truth, edge_from, edge_to, true_path, radius
+    )
+    if len(vertex_positions) == 0:
+        return MapAccuracy(None, fidelity, None)
+    alignment = align_rigid_2d(
+        np.asarray(vertex_positions, dtype=np.float64)[:, :2],
+        np.asarray(vertex_truth, dtype=np.float64)[:, :2],
+    )
+    ate = absolute_trajectory_error(vertex_positions, vertex_truth)
+    return MapAccuracy(ate, fidelity, alignment)
+
+
+@dataclass(frozen=True, slots=True)
 class SizeChange:
     """How a map's vertex count changed over a stretch of data, with exploration set apart.
 

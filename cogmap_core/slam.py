@@ -30,11 +30,12 @@ from cogmap_core.evaluation import (
     EvaluationSettings,
     LayoutFidelity,
     LoopClosureScore,
+    MapAccuracy,
     SizeChange,
     absolute_trajectory_error,
     dead_reckoning,
     interpolate_poses,
-    layout_fidelity,
+    map_accuracy,
     score_loop_closures,
     size_change,
 )
@@ -50,7 +51,7 @@ from cogmap_core.event_file import (
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
-from cogmap_core.map_graph import grow_array
+from cogmap_core.map_graph import MapSnapshot, grow_array
 
 FloatArray = NDArray[np.float64]
 ALL_MODES: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
@@ -403,12 +404,15 @@ class EventLog:
         self, cmap: CognitiveMap, radius: float = LAYOUT_RADIUS
     ) -> LayoutFidelity | None:
         """Completeness and correctness of a map against the dense true path (per frame)."""
-        if not self.has_ground_truth():
-            return None
-        snap = cmap.snapshot()
+        accuracy = self.map_accuracy(cmap.snapshot(), radius)
+        return None if accuracy is None else accuracy.fidelity
+
+    def map_accuracy(self, snap: MapSnapshot, radius: float = LAYOUT_RADIUS) -> MapAccuracy | None:
+        """ATE and layout fidelity of a map's snapshot against ground truth (None without)."""
         truth = self.truth_at(snap.vertex_time)
-        assert truth is not None
-        return layout_fidelity(
+        if truth is None:
+            return None
+        return map_accuracy(
             snap.poses, truth, *snap.edge_ends(), np.asarray(self.ground_truth), radius
         )
 
@@ -607,10 +611,6 @@ class SlamSession:
             self.maps.maps[mode] = cmap
 
     # ------------------------------------------------------------------ evaluation
-    def vertex_ground_truth(self, cmap: CognitiveMap) -> FloatArray | None:
-        """Ground-truth pose at each live vertex's creation time (None without ground truth)."""
-        return self.log.vertex_ground_truth(cmap)
-
     def ate(self, cmap: CognitiveMap) -> float | None:
         """RMSE of vertex positions against ground truth after rigid alignment (m)."""
         return self.log.map_ate(cmap)

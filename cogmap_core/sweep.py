@@ -406,12 +406,11 @@ def evaluate_cell(
         "size_change_raw": None,
         "exploration_vertices": None,
     }
-    ate = log.map_ate(cmap)
-    fidelity = log.layout_fidelity(cmap, radius)
-    if ate is not None and fidelity is not None:
-        figures["ate_m"] = ate
-        figures["completeness"] = fidelity.completeness
-        figures["correctness"] = fidelity.correctness
+    accuracy = log.map_accuracy(cmap.snapshot(), radius)
+    if accuracy is not None and accuracy.ate is not None:
+        figures["ate_m"] = accuracy.ate
+        figures["completeness"] = accuracy.fidelity.completeness
+        figures["correctness"] = accuracy.fidelity.correctness
         first = log.frame_time[0]
         start = end - growth_fraction * (end - first)
         growth = log.size_change(cmap, start, end, radius)

@@ -16,9 +16,8 @@ from cogmap_core.cognitive_map import CognitiveMap
 from cogmap_core.evaluation import (
     EvaluationSettings,
     LayoutFidelity,
-    absolute_trajectory_error,
     align_rigid_2d,
-    layout_fidelity,
+    map_accuracy,
 )
 from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.slam import EventLog
@@ -66,16 +65,14 @@ def figure_inputs(log: EventLog, cmap: CognitiveMap) -> FigureInputs:
 def compute_figures(inputs: FigureInputs, judging: EvaluationSettings | None = None) -> MapFigures:
     """ATE, layout fidelity (at ``judging``'s radius) and the truth's alignment of a map.
 
-    The same computations as ``cogmap run``'s report (:class:`~cogmap_core.slam.EventLog`).
+    The same computation as ``cogmap run``'s report (:func:`~cogmap_core.evaluation.map_accuracy`).
     """
     snap, truth, path = inputs.map, inputs.vertex_truth, inputs.path
     if truth is None or path is None:
         return MapFigures(None, None, None)
     radius = (judging or EvaluationSettings()).layout_radius
-    n = snap.vertex_ids.shape[0]
-    ate = absolute_trajectory_error(snap.poses, truth) if n else None
-    fidelity = layout_fidelity(snap.poses, truth, *snap.edge_ends(), path, radius)
-    return MapFigures(ate, fidelity, _alignment(snap, truth, path))
+    accuracy = map_accuracy(snap.poses, truth, *snap.edge_ends(), path, radius)
+    return MapFigures(accuracy.ate, accuracy.fidelity, _alignment(snap, truth, path))
 
 
 def _alignment(
