@@ -26,7 +26,7 @@ from cogmap_core import __version__
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError, InputFileError, ParameterError
+from cogmap_core.errors import CogmapError, InputFileError
 from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
     MapAccuracy,
@@ -41,7 +41,14 @@ from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
-from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
+from cogmap_core.sources.detect import (
+    KINDS,
+    LogOptions,
+    Source,
+    check_sessions_allowed,
+    open_source,
+    resolve_format,
+)
 from cogmap_core.sources.odometry_log import LogReader
 
 MAP_ORDER: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
@@ -376,14 +383,9 @@ class HeadlessPipeline:
         self.files: list[Path] = []
         self.session_notes: list[str] = []
         options = self.options
-        if not self.kind.has_camera and (
-            options.resume is not None or options.save_session is not None
-        ):
+        if options.resume is not None or options.save_session is not None:
             flag = "--resume" if options.resume is not None else "--save-session"
-            raise ParameterError(
-                f"{flag}: sessions are for bags; {self.bag} is a log of odometry and place "
-                f"recognition ({self.format}): run it whole, without {flag}"
-            )
+            check_sessions_allowed(self.format, self.bag, flag, f"run it whole, without {flag}")
         if options.save_session is not None:
             check_output_file(options.save_session, "--save-session", options.force)
         if options.save_events is not None:

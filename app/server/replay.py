@@ -47,12 +47,19 @@ from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagReader, BagTopics
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.errors import CogmapError, ParameterError
+from cogmap_core.errors import CogmapError
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, SlamSession
-from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source, resolve_format
+from cogmap_core.sources.detect import (
+    KINDS,
+    LogOptions,
+    Source,
+    check_sessions_allowed,
+    open_source,
+    resolve_format,
+)
 
 GenerationProgress = Callable[[int, int], None]
 BagSource = Path | Callable[[GenerationProgress], Path]
@@ -90,18 +97,14 @@ PARAMS_USED: dict[MapMode, frozenset[str]] = {
 }
 
 
-def check_resumable(path: Path | str, fmt: str) -> None:
+def check_resumable(path: Path | str | None, fmt: str) -> None:
     """Refuse to continue a saved session on ``path`` unless it is a bag (format ``fmt``).
 
     Raises:
         ParameterError: ``path`` is a log of odometry and place recognition.
 
     """
-    if not KINDS[fmt].has_camera:
-        raise ParameterError(
-            f"--resume: sessions are for bags; {path} is a log of odometry and place "
-            f"recognition ({fmt}): serve it without --resume"
-        )
+    check_sessions_allowed(fmt, path, "--resume", "serve it without --resume")
 
 
 def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:

@@ -78,6 +78,22 @@ class LogOptions:
     use_ground_truth: bool = True
 
 
+def check_sessions_allowed(fmt: str, path: Path | str | None, flag: str, advice: str) -> None:
+    """Refuse a session option (``--resume``, ``--save-session``) for an input that is no bag.
+
+    Sessions hold a camera front end's state; a log of odometry and place recognition has none.
+
+    Raises:
+        ParameterError: ``{flag}: sessions are for bags; {path} is a log ... ({fmt}): {advice}``.
+
+    """
+    if not KINDS[fmt].has_camera:
+        raise ParameterError(
+            f"{flag}: sessions are for bags; {path} is a log of odometry and place recognition "
+            f"({fmt}): {advice}"
+        )
+
+
 def check_companions(kind: str, loops: Path | None, ground_truth: Path | None) -> None:
     """Refuse a loop or ground-truth file given for an input kind that does not take it.
 
