@@ -22,7 +22,7 @@ import html
 import math
 import threading
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -94,7 +94,7 @@ def swatch(color: tuple[int, int, int]) -> str:
     return f'<span class="cogmap-swatch" style="background:{rgb(color)}"></span>'
 
 
-@dataclass
+@dataclass(frozen=True)
 class ViewState:
     """What one viewer looks at."""
 
@@ -408,6 +408,10 @@ class ClientView:
 
     def frame_camera(self, top: bool = True) -> None:
         """Point the camera at what the view shows, left of the control panel."""
+        with self._lock:  # (see follow)
+            self._frame_camera(top)
+
+    def _frame_camera(self, top: bool) -> None:
         extent = self.content_extent() or (-0.5, 3.5, -0.5, 2.5)
         camera = self.client.camera
         width = camera.image_width or 1280
@@ -434,7 +438,15 @@ class ClientView:
             camera.look_at = (cx, cy, 0.0)
 
     def follow(self) -> None:
-        """Re-frame when the map grew out of the framed box or shrank to a fraction of it."""
+        """Re-frame when the map grew out of the framed box or shrank to a fraction of it.
+
+        Runs under the view's own lock: the replay's worker and the figures thread both call it,
+        and two framings at once would each take the other's camera pose for the viewer's move.
+        """
+        with self._lock:
+            self._follow()
+
+    def _follow(self) -> None:
         if not self.state.follow:
             return
         extent = self.content_extent()
@@ -452,7 +464,7 @@ class ClientView:
             framed_area = (framed[1] - framed[0]) * (framed[3] - framed[2])
             if not grew and area >= 0.4 * framed_area:
                 return
-        self.frame_camera(top=True)
+        self._frame_camera(top=True)
 
     def _on_camera(self, camera: viser.CameraHandle) -> None:
         """A camera report: the viewer moved the camera (not the view): stop following the map.
@@ -472,7 +484,7 @@ class ClientView:
             return
         if close:
             return
-        self.state.follow = False
+        self.state = replace(self.state, follow=False)  # replaced whole, as _read_controls does
         self._setting.on = True
         try:
             self.follow_checkbox.value = False
