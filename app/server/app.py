@@ -680,10 +680,7 @@ class CogmapApp:
             typed = parse_typed(spec, box.value)
         except Refused as exc:  # only a value set without the gate can get here
             current = getattr(self.replay.params, spec.name)
-            self.params_md.content = self._params_message(
-                f"refused {spec.label}: {exc}; {spec.label} stays {format_value(current)}",
-                error=True,
-            )
+            self._param_note(Refusal(spec.label, str(exc), format_value(current)))
             self._set_quietly(box, format_value(current))
             return
         message = typed.message

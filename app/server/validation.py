@@ -73,9 +73,6 @@ class Refusal:
 class Adjustment:
     """A value the gate applied changed (clamped, normalised): ``message`` says how."""
 
-    label: str
-    sent: Any
-    value: Any
     message: str
 
 
@@ -247,7 +244,7 @@ class GuiGate:
                 self._resend(handle)
             if note is not None and value != sent:
                 message = wording or f"{label} = {sent!r} is out of range: set to {value!r}"
-                note(Adjustment(label, sent, value, message))
+                note(Adjustment(message))
         return None
 
     def _refuse(self, handle: Any, label: str, reason: str, note: Note | None) -> None:
