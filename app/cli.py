@@ -61,9 +61,31 @@ class CommandLineParser(argparse.ArgumentParser):
     their parent).
     """
 
+    #: The sub-commands' parsers, by name (set by :func:`build_parser` on the top-level one).
+    commands: dict[str, argparse.ArgumentParser] = {}
+
     def error(self, message: str) -> NoReturn:
         """Print the one-line usage error and exit with code 2."""
         self.exit(2, f"{self.prog}: error: {message}; see {self.prog} --help\n")
+
+    def parse_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> argparse.Namespace:
+        """Parse like argparse; unrecognized arguments are reported by the parser they follow.
+
+        argparse reports them from the top-level parser (``cogmap: error: ...``) even when they
+        were given to a sub-command; here ``cogmap run ... --bogus`` is ``cogmap run``'s error.
+        """
+        parsed, unknown = self.parse_known_args(args, namespace)
+        if unknown:
+            tokens = list(sys.argv[1:] if args is None else args)
+            command = getattr(parsed, "command", None)
+            owner: argparse.ArgumentParser = self
+            if command in self.commands and command in tokens:
+                if tokens.index(unknown[0]) > tokens.index(command):
+                    owner = self.commands[command]
+            owner.error(f"unrecognized arguments: {' '.join(unknown)}")
+        return parsed
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -83,20 +105,14 @@ def build_parser() -> argparse.ArgumentParser:
                 continue
             raise
         module.add_parser(subparsers)
+    parser.commands = dict(subparsers.choices)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``cogmap`` command line; return the process exit code."""
     parser = build_parser()
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:  # named after the sub-command they were given to, not the top-level parser
-        command = f"cogmap {args.command}" if getattr(args, "command", None) else "cogmap"
-        print(
-            f"{command}: error: unrecognized arguments: {' '.join(unknown)}; see {command} --help",
-            file=sys.stderr,
-        )
-        return 2
+    args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

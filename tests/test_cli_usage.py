@@ -46,6 +46,10 @@ def _usage_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
             ["--no-such-option"],
             "cogmap: error: unrecognized arguments: --no-such-option; see cogmap --help",
         ),
+        (  # given before the sub-command: the top level's
+            ["--bogus", "run", "x.bag", "--out", "o"],
+            "cogmap: error: unrecognized arguments: --bogus; see cogmap --help",
+        ),
     ],
 )
 def test_usage_errors_are_one_line_with_the_command_and_its_help(
