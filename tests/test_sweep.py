@@ -47,6 +47,7 @@ from cogmap_core.sweep import (
     smallest_complete,
     sweep_spec,
 )
+from tests.test_faults import one_line_error
 
 DATA = Path(__file__).parent / "data"
 RECORDED = DATA / "figure_eight_3laps.events.npz"
@@ -466,9 +467,8 @@ def test_workers_can_read_the_events_from_the_folder(tmp_path: Path, in_process_
 
 # --------------------------------------------------------------------------- the command
 def _error_line(capsys: pytest.CaptureFixture[str]) -> str:
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    return err.strip().splitlines()[-1]
+    """The command's only error line (progress lines may come before it)."""
+    return one_line_error(capsys.readouterr().err)
 
 
 def test_cogmap_sweep_end_to_end(tiny_bag: Path, tmp_path: Path, capsys):
