@@ -100,7 +100,9 @@ def main() -> None:
     events = prepare_events(source, out)
     print(
         f"default dataset: {events.frames} frames, {events.duration_s:.0f} s of data, "
-        f"{events.events} events ({events.origin}, {time.perf_counter() - started:.1f} s)"
+        f"{events.events} events ({events.origin}, {time.perf_counter() - started:.1f} s); "
+        f"dead-reckoning ATE {events.dead_reckoning_ate_m:.3f} m (the baseline every map's ATE "
+        "below must beat)"
     )
     spec = sweep_spec({"delta": args.delta, "t_interval": args.t_interval})
     options = SweepOptions(spec=spec)
