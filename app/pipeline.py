@@ -185,7 +185,7 @@ def final_maps(session: SlamSession) -> dict[MapMode, FinalMap]:
         truth = log.truth_at(snapshot.vertex_time)
         accuracy = None
         if truth is not None and path is not None:
-            accuracy = map_accuracy(snapshot.poses, truth, *snapshot.edge_ends(), path, radius)
+            accuracy = map_accuracy(snapshot, truth, path, radius)
         maps[mode] = FinalMap(cmap, snapshot, truth, accuracy)
     return maps
 

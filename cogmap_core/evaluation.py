@@ -18,6 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from cogmap_core.map_graph import MapSnapshot
+
 FloatArray = NDArray[np.float64]
 
 TRUE_LOOP_CLOSURE_DISTANCE = 0.1
@@ -335,29 +337,26 @@ class MapAccuracy:
 
 
 def map_accuracy(
-    vertex_positions: FloatArray,
+    snapshot: MapSnapshot,
     vertex_truth: FloatArray,
-    edge_from: NDArray[np.int64],
-    edge_to: NDArray[np.int64],
     true_path: FloatArray,
     radius: float = LAYOUT_RADIUS,
 ) -> MapAccuracy:
     """ATE (:func:`absolute_trajectory_error`) and :func:`layout_fidelity` of one map.
 
-    The arguments are those of :func:`layout_fidelity`; the one place where a map's accuracy
-    figures are computed (``cogmap run``'s report, the page, sweeps, benchmarks).
+    ``vertex_truth``: the true pose at each vertex's creation time (rows of ``snapshot``);
+    ``true_path``: the dense true path. The one place where a map's accuracy figures are
+    computed (``cogmap run``'s report, the page, sweeps, benchmarks).
     """
-    fidelity = layout_fidelity(
-        vertex_positions, vertex_truth, edge_from, edge_to, true_path, radius
-    )
-    if len(vertex_positions) == 0:
+    poses = snapshot.poses
+    fidelity = layout_fidelity(poses, vertex_truth, *snapshot.edge_ends(), true_path, radius)
+    if len(poses) == 0:
         return MapAccuracy(None, fidelity, None)
     alignment = align_rigid_2d(
-        np.asarray(vertex_positions, dtype=np.float64)[:, :2],
+        np.asarray(poses, dtype=np.float64)[:, :2],
         np.asarray(vertex_truth, dtype=np.float64)[:, :2],
     )
-    ate = absolute_trajectory_error(vertex_positions, vertex_truth)
-    return MapAccuracy(ate, fidelity, alignment)
+    return MapAccuracy(absolute_trajectory_error(poses, vertex_truth), fidelity, alignment)
 
 
 @dataclass(frozen=True, slots=True)

@@ -412,9 +412,7 @@ class EventLog:
         truth = self.truth_at(snap.vertex_time)
         if truth is None:
             return None
-        return map_accuracy(
-            snap.poses, truth, *snap.edge_ends(), np.asarray(self.ground_truth), radius
-        )
+        return map_accuracy(snap, truth, np.asarray(self.ground_truth), radius)
 
     def size_change(
         self, cmap: CognitiveMap, start: float, end: float, radius: float = LAYOUT_RADIUS

@@ -71,7 +71,7 @@ def compute_figures(inputs: FigureInputs, judging: EvaluationSettings | None = N
     if truth is None or path is None:
         return MapFigures(None, None, None)
     radius = (judging or EvaluationSettings()).layout_radius
-    accuracy = map_accuracy(snap.poses, truth, *snap.edge_ends(), path, radius)
+    accuracy = map_accuracy(snap, truth, path, radius)
     return MapFigures(accuracy.ate, accuracy.fidelity, _alignment(snap, truth, path))
 
 
