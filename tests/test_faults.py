@@ -190,7 +190,9 @@ def test_ctrl_c_while_processing_leaves_nothing(
 def _run_paused_in_the_write_phase(bag: Path, out: Path, extra: list[str]) -> subprocess.Popen:
     """``cogmap run`` in a subprocess whose g2o writer stalls after writing the first map."""
     script = (
-        "import sys, time\n"
+        "import signal, sys, time\n"
+        # a shell's background job starts with Ctrl-C ignored, and Python keeps it ignored
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
         "import app.pipeline as p\n"
         "real = p.write_g2o\n"
         "def slow(graph, path):\n"
@@ -495,6 +497,16 @@ def test_rendering_workers_exit_when_their_parent_is_killed(tmp_path: Path) -> N
         proc.kill()
 
 
+@pytest.fixture
+def ctrl_c_reaches_us() -> Iterator[None]:
+    """Ctrl-C raises KeyboardInterrupt here, even in a suite started as a shell's background job
+    (which starts with SIGINT ignored)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.usefixtures("ctrl_c_reaches_us")
 def test_ctrl_c_while_moving_the_report_into_place_is_held_back(
     bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys
 ) -> None:
