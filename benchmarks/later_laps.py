@@ -50,12 +50,15 @@ def main() -> None:
         laps = data.lap_times
         print(f"\n{layout} (seed {args.seed}): ATE (m) on the first lap's vertices, built up to")
         print(f"  {'map':18} " + " ".join(f"{f'lap {k}':>8}" for k in range(1, len(laps))))
+        lap_events = [
+            log.events_until(int(np.searchsorted(log.frame_time, lap_end, side="right")))
+            for lap_end in laps[1:]
+        ]
         for mode in MODES:
             row = []
-            for lap_end in laps[1:]:
-                frames = int(np.searchsorted(log.frame_time, lap_end, side="right"))
+            for lap_end, events in zip(laps[1:], lap_events, strict=True):
                 cmap = CognitiveMap(mode, params)
-                cmap.apply_all(log.events_until(frames))
+                cmap.apply_all(events)
                 cmap.finish(lap_end)
                 row.append(f"{first_lap_ate(cmap, log, laps[1]):8.4f}")
             print(f"  {mode.value:18} " + " ".join(row), flush=True)
