@@ -177,15 +177,14 @@ def final_maps(session: SlamSession) -> dict[MapMode, FinalMap]:
     """Every map of ``session`` copied once, with everything a report computes from it."""
     radius = session.evaluation.layout_radius
     log = session.log
-    path = np.asarray(log.ground_truth) if log.has_ground_truth() else None
     maps = {}
     for mode in MAP_ORDER:
         cmap = session.maps[mode]
         snapshot = cmap.snapshot()
-        truth = log.truth_at(snapshot.vertex_time)
+        truth = log.truth_at(snapshot.vertex_time)  # None without ground truth
         accuracy = None
-        if truth is not None and path is not None:
-            accuracy = map_accuracy(snapshot, truth, path, radius)
+        if truth is not None:
+            accuracy = map_accuracy(snapshot, truth, np.asarray(log.ground_truth), radius)
         maps[mode] = FinalMap(cmap, snapshot, truth, accuracy)
     return maps
 
