@@ -269,15 +269,8 @@ class BagEvents:
             return None
 
 
-def manifest_bag_records(path: Path) -> dict[str, dict[str, Any]]:
-    """The per-bag records of a sweep's ``sweep.json``, by bag key (``{}`` if there are none).
-
-    A missing or unreadable manifest, or one without bag records, gives ``{}``.
-    """
-    try:
-        manifest = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
+def manifest_bag_records(manifest: object) -> dict[str, dict[str, Any]]:
+    """The per-bag records of a parsed ``sweep.json``, by bag key (``{}`` if there are none)."""
     bags = manifest.get("bags") if isinstance(manifest, dict) else None
     if not isinstance(bags, list):
         return {}
@@ -1014,9 +1007,9 @@ class Sweep:
     # ------------------------------------------------------------------ steps
     def run(self) -> SweepResult:
         """Run the sweep (resuming a folder of the same sweep); return what it produced."""
-        with self._locked_folder():
-            # read before the first write replaces them: a finished sweep reuses its figures
-            self._manifest_bags = manifest_bag_records(self.out_dir / MANIFEST_FILE)
+        with self._locked_folder() as previous:
+            # kept before the first write replaces them: a finished sweep reuses its figures
+            self._manifest_bags = manifest_bag_records(previous)
             self._write_manifest("running")
             connection: DaskConnection | None = None
             try:
@@ -1062,8 +1055,10 @@ class Sweep:
             self.say("Dask dashboard: off (pip install bokeh to get one)")
 
     @contextlib.contextmanager
-    def _locked_folder(self) -> Iterator[None]:
+    def _locked_folder(self) -> Iterator[dict[str, Any] | None]:
+        """Check the folder is this sweep's (or new) and lock it; yields its parsed manifest."""
         out = self.out_dir
+        previous: dict[str, Any] | None = None
         if out.exists() and not out.is_dir():
             raise SweepError(f"{out} exists and is not a folder; choose another --out")
         manifest = out / MANIFEST_FILE
@@ -1079,7 +1074,11 @@ class Sweep:
                     raise SweepError(
                         f"{manifest} is not readable JSON; choose another --out"
                     ) from None
-                if previous.get("format") != SWEEP_FORMAT or previous.get("digest") != self.digest:
+                if (
+                    not isinstance(previous, dict)
+                    or previous.get("format") != SWEEP_FORMAT
+                    or previous.get("digest") != self.digest
+                ):
                     raise SweepError(
                         f"{out} holds another sweep (other settings, bags, map or bag "
                         "contents); choose another --out, or re-run that sweep's own command"
@@ -1095,7 +1094,7 @@ class Sweep:
                         f"another cogmap sweep is writing {out}; wait for it or choose "
                         "another --out"
                     ) from None
-            yield
+            yield previous
         finally:
             handle.close()
 
