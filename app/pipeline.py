@@ -528,6 +528,7 @@ class HeadlessPipeline:
         frontend = {} if self.frontend is None else self.frontend.to_dict()
         recording = self.session.log.recording(str(self.bag), frontend)
         recording.meta["recorded_by"] = f"cogmap {__version__} run"
+        recording.meta["input_format"] = self.format  # a sweep takes a bag's events only
         if self.frontend is not None:
             recording.meta["topics"] = asdict(self.options.topics or BagTopics())
             recording.meta["image_scale"] = self.options.image_scale

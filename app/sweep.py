@@ -339,6 +339,12 @@ def prepare_events(
             shared_events_dir().mkdir(parents=True, exist_ok=True)
             write_bytes_atomic(shared_events_dir() / source.events_name, target.read_bytes())
         origin = "front end"
+    recorded_from = recording.meta.get("input_format", "bag")
+    if recorded_from != "bag":
+        raise SweepError(
+            f"{source.path}: these events were recorded from a {recorded_from} odometry log, "
+            "whose maps are set and judged differently; a sweep takes bags and their event files"
+        )
     if recording.ground_truth is None:
         raise SweepError(
             f"{source.path}: the data has no ground truth; a sweep measures every map against it "

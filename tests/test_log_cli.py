@@ -115,6 +115,22 @@ def test_a_logs_events_can_be_saved(square_log: Path, tmp_path: Path) -> None:
     saved = load_event_file(events)
     assert saved.events == list(reference.log.events)
     assert saved.frames == reference.log.frames and saved.frontend == {}
+    assert saved.meta["input_format"] == "tuc"
+
+
+def test_a_sweep_refuses_a_logs_events(square_log: Path, tmp_path: Path, capsys) -> None:
+    """A log's saved events would be swept with a bag's settings and radius: refused."""
+    events = tmp_path / "square.events.npz"
+    assert (
+        main(["run", str(square_log), "--out", str(tmp_path / "r"), "--save-events", str(events)])
+        == 0
+    )
+    capsys.readouterr()
+    assert main(["sweep", str(events), "--out", str(tmp_path / "s"), "--delta", "3,6"]) != 0
+    assert capsys.readouterr().err.strip() == (
+        f"cogmap sweep: error: {events}: these events were recorded from a tuc odometry log, "
+        "whose maps are set and judged differently; a sweep takes bags and their event files"
+    )
 
 
 def test_settings_from_the_command_line(square_log: Path, tmp_path: Path, capsys) -> None:
