@@ -313,12 +313,12 @@ def main() -> int:
     for mode in MODES:
         cmap = run.session.maps[mode]
         change = log.size_change(cmap, lap_times[first_lap], lap_times[laps], LAYOUT_RADIUS)
-        fidelity = log.layout_fidelity(cmap, LAYOUT_RADIUS)
-        assert change is not None and fidelity is not None
+        accuracy = log.map_accuracy(cmap.snapshot(), LAYOUT_RADIUS)
+        assert change is not None and accuracy is not None
+        fidelity, ate = accuracy.fidelity, accuracy.ate
         changes[mode] = change
         fidelities[mode] = fidelity
         optimise_s = sum(o.wall_s for o in cmap.optimizations)
-        ate = log.map_ate(cmap)
         print(
             f"  {mode.value:18} V {cmap.num_vertices:5d} E {cmap.num_edges:5d}; end of lap "
             f"{first_lap} to {laps}: {change.start_vertices} -> {change.end_vertices} vertices, "

@@ -76,16 +76,11 @@ def bag_for(layout: str, seed: int = 1) -> Path:
     return path
 
 
-def events_for(bag: Path) -> tuple[EventRecording, float]:
-    """The front end's events of a bag (the user-wide event cache) and the front end's time."""
-    recording = cached_bag_events(bag, print)
-    return recording, float(recording.meta.get("frontend_wall_s", float("nan")))
-
-
 def load_dataset(layout: str, seed: int = 1) -> Dataset:
-    """Bag, lap times and events of one layout and seed."""
+    """Bag, lap times and events of one layout and seed (events: the user-wide event cache)."""
     bag = bag_for(layout, seed)
-    recording, frontend_s = events_for(bag)
+    recording = cached_bag_events(bag, print)
+    frontend_s = float(recording.meta.get("frontend_wall_s", float("nan")))
     lap_times = plan_dataset(MazeConfig(layout=layout, seed=seed)).trajectory.lap_times
     return Dataset(layout, seed, bag, lap_times, recording, frontend_s)
 

@@ -90,7 +90,12 @@ def absolute_trajectory_error(estimate: FloatArray, truth: FloatArray) -> float:
     gt = np.asarray(truth, dtype=np.float64)[:, :2]
     if est.shape[0] == 0:
         return float("nan")
-    aligned = align_rigid_2d(est, gt).apply(est)
+    return _aligned_rmse(align_rigid_2d(est, gt), est, gt)
+
+
+def _aligned_rmse(alignment: RigidTransform2D, est: FloatArray, gt: FloatArray) -> float:
+    """RMSE (m) between ``(N, 2)`` positions ``est`` moved by ``alignment`` and ``gt``."""
+    aligned = alignment.apply(est)
     return float(np.sqrt(np.mean(np.sum((aligned - gt) ** 2, axis=1))))
 
 
@@ -270,6 +275,8 @@ def layout_fidelity(
     edge_to: NDArray[np.int64],
     true_path: FloatArray,
     radius: float = LAYOUT_RADIUS,
+    *,
+    alignment: RigidTransform2D | None = None,
 ) -> LayoutFidelity:
     """Completeness and correctness of a map's layout against the true path.
 
@@ -282,6 +289,8 @@ def layout_fidelity(
         true_path: ``(M, 2+)`` the dense ground-truth path in time order (the bag's overhead
             poses), not the vertex poses.
         radius: the tolerance (m).
+        alignment: the rigid alignment of ``vertex_positions`` onto ``vertex_truth`` when the
+            caller has it already (:func:`align_rigid_2d` of the two); computed when ``None``.
 
     Both measures are length-weighted: the path and the edges are cut into pieces of at most
     ``radius / 8`` and each piece counts with its length, judged at its midpoint against the
@@ -299,7 +308,9 @@ def layout_fidelity(
     epv = e_from.shape[0] / n if n else float("nan")
     if n == 0 or path.shape[0] < 2:
         return LayoutFidelity(float("nan"), float("nan"), radius, epv, 0.0, 0.0)
-    aligned = align_rigid_2d(pos, truth).apply(pos)
+    if alignment is None:
+        alignment = align_rigid_2d(pos, truth)
+    aligned = alignment.apply(pos)
     spacing = radius / 8.0
     # the map's segments: every edge, plus every vertex as a point (covers an edge-less map)
     seg_a = np.concatenate([aligned[e_from], aligned])
@@ -345,18 +356,22 @@ def map_accuracy(
     """ATE (:func:`absolute_trajectory_error`) and :func:`layout_fidelity` of one map.
 
     ``vertex_truth``: the true pose at each vertex's creation time (rows of ``snapshot``);
-    ``true_path``: the dense true path. The one place where a map's accuracy figures are
-    computed (``cogmap run``'s report, the page, sweeps, benchmarks).
+    ``true_path``: the dense true path. The figures of ``cogmap run``'s report, the page and
+    sweeps; the rigid alignment is computed once and serves both, so the ATE and fidelity are
+    the same numbers as those two functions give alone (as benchmarks call them).
     """
     poses = snapshot.poses
-    fidelity = layout_fidelity(poses, vertex_truth, *snapshot.edge_ends(), true_path, radius)
+    edge_from, edge_to = snapshot.edge_ends()
     if len(poses) == 0:
+        fidelity = layout_fidelity(poses, vertex_truth, edge_from, edge_to, true_path, radius)
         return MapAccuracy(None, fidelity, None)
-    alignment = align_rigid_2d(
-        np.asarray(poses, dtype=np.float64)[:, :2],
-        np.asarray(vertex_truth, dtype=np.float64)[:, :2],
+    est = np.asarray(poses, dtype=np.float64)[:, :2]
+    gt = np.asarray(vertex_truth, dtype=np.float64)[:, :2]
+    alignment = align_rigid_2d(est, gt)
+    fidelity = layout_fidelity(
+        poses, vertex_truth, edge_from, edge_to, true_path, radius, alignment=alignment
     )
-    return MapAccuracy(absolute_trajectory_error(poses, vertex_truth), fidelity, alignment)
+    return MapAccuracy(_aligned_rmse(alignment, est, gt), fidelity, alignment)
 
 
 @dataclass(frozen=True, slots=True)

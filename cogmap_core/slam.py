@@ -35,6 +35,7 @@ from cogmap_core.evaluation import (
     absolute_trajectory_error,
     dead_reckoning,
     interpolate_poses,
+    layout_fidelity,
     map_accuracy,
     score_loop_closures,
     size_change,
@@ -404,8 +405,13 @@ class EventLog:
         self, cmap: CognitiveMap, radius: float = LAYOUT_RADIUS
     ) -> LayoutFidelity | None:
         """Completeness and correctness of a map against the dense true path (per frame)."""
-        accuracy = self.map_accuracy(cmap.snapshot(), radius)
-        return None if accuracy is None else accuracy.fidelity
+        snap = cmap.snapshot()
+        truth = self.truth_at(snap.vertex_time)
+        if truth is None:
+            return None
+        return layout_fidelity(
+            snap.poses, truth, *snap.edge_ends(), np.asarray(self.ground_truth), radius
+        )
 
     def map_accuracy(self, snap: MapSnapshot, radius: float = LAYOUT_RADIUS) -> MapAccuracy | None:
         """ATE and layout fidelity of a map's snapshot against ground truth (None without)."""

@@ -11,9 +11,11 @@ from cogmap_core.evaluation import (
     dead_reckoning,
     interpolate_poses,
     layout_fidelity,
+    map_accuracy,
     score_loop_closures,
     size_change,
 )
+from cogmap_core.map_graph import MapSnapshot
 
 
 def test_alignment_recovers_a_rigid_motion_exactly():
@@ -105,6 +107,43 @@ def test_layout_fidelity_aligns_the_map_first():
     assert result.completeness == pytest.approx(1.0) and result.correctness == pytest.approx(1.0)
     with pytest.raises(ValueError, match="radius"):
         layout_fidelity(moved, vertices, [0, 1], [1, 2], straight_path(1.0), radius=0.0)
+
+
+def _snapshot(poses: np.ndarray, edge_from: list[int], edge_to: list[int]) -> MapSnapshot:
+    n, e = poses.shape[0], len(edge_from)
+    return MapSnapshot(
+        vertex_ids=np.arange(n, dtype=np.int64),
+        poses=poses,
+        vertex_time=np.arange(n, dtype=np.float64),
+        vertex_view=np.zeros(n, dtype=np.int64),
+        edge_from=np.asarray(edge_from, dtype=np.int64),
+        edge_to=np.asarray(edge_to, dtype=np.int64),
+        edge_rel=np.zeros((e, 3)),
+        edge_time=np.zeros(e),
+        edge_kind=np.zeros(e, dtype=np.int8),
+        edge_cluster=np.zeros(e, dtype=np.int64),
+        current_vertex=0,
+        current_pose=np.zeros(3),
+    )
+
+
+def test_map_accuracy_gives_the_figures_of_the_functions_alone():
+    rng = np.random.default_rng(3)
+    truth = np.column_stack([np.linspace(0.0, 2.0, 9), np.zeros(9), np.zeros(9)])
+    c, s = np.cos(0.4), np.sin(0.4)
+    poses = truth.copy()
+    poses[:, :2] = truth[:, :2] @ np.array([[c, s], [-s, c]]) + [1.0, 2.0]
+    poses[:, :2] += rng.normal(scale=0.02, size=(9, 2))
+    edges = (list(range(8)), list(range(1, 9)))
+    path = straight_path(2.0)
+    accuracy = map_accuracy(_snapshot(poses, *edges), truth, path, 0.03)
+    assert accuracy.ate == absolute_trajectory_error(poses, truth)
+    assert accuracy.fidelity == layout_fidelity(poses, truth, *edges, path, 0.03)
+    assert accuracy.alignment == align_rigid_2d(poses, truth)
+    given = layout_fidelity(poses, truth, *edges, path, 0.03, alignment=accuracy.alignment)
+    assert given == accuracy.fidelity
+    empty = map_accuracy(_snapshot(np.zeros((0, 3)), [], []), np.zeros((0, 3)), path)
+    assert empty.ate is None and empty.alignment is None
 
 
 def test_size_change_sets_exploration_apart():

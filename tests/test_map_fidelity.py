@@ -42,6 +42,16 @@ def test_every_map_keeps_the_layout(built):
         assert fidelity.edges_per_vertex <= 1.5, (name, mode, fidelity)
 
 
+def test_the_single_figures_are_those_of_map_accuracy(built):
+    # benchmarks take ATE and fidelity from one map_accuracy; the page and sweeps do too
+    name, log, maps = built
+    for mode, cmap in maps.items():
+        accuracy = log.map_accuracy(cmap.snapshot())
+        assert accuracy is not None, (name, mode)
+        assert log.layout_fidelity(cmap) == accuracy.fidelity, (name, mode)
+        assert log.map_ate(cmap) == accuracy.ate, (name, mode)
+
+
 def test_every_map_beats_dead_reckoning(built):
     name, log, maps = built
     dead_reckoning = log.dead_reckoning_ate()

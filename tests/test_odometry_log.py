@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cogmap_core.datasets.odometry_csv import read_odometry_csv
-from cogmap_core.datasets.tuc import read_tuc
+from cogmap_core.datasets.tuc import looks_like_tuc, read_tuc
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
 from cogmap_core.sources.detect import LogOptions, detect_format, open_source
@@ -229,6 +229,18 @@ def test_detection_from_the_content(tmp_path: Path, straight: Path) -> None:
     # --format overrides detection; a TUC file read as CSV fails on its first line
     with pytest.raises(LogFormatError, match=r":1: header has 1 columns; odometry files"):
         open_source(straight, "csv")
+
+
+def test_the_first_data_line_decides_tuc(tmp_path: Path) -> None:
+    assert looks_like_tuc("odom2") and looks_like_tuc("loop")
+    assert looks_like_tuc("point2") and looks_like_tuc("angle")
+    assert not looks_like_tuc("hello") and not looks_like_tuc("")
+    # comments and blank lines are skipped; a later unknown type is the reader's business
+    tuc = write(tmp_path / "commented.txt", ["# a comment", "", "odom2 0 0 0 0 0 0 0", "x 1"])
+    assert detect_format(tuc) == "tuc"
+    other = write(tmp_path / "later.txt", ["hello world", "odom2 0 0 0 0 0 0 0"])
+    with pytest.raises(InputFileError, match="not a bag, a TUC log or a CSV log"):
+        detect_format(other)
 
 
 def test_log_settings_are_validated() -> None:

@@ -38,13 +38,13 @@ INPUT_FIELDS = {"odom2": 7, "loop": 3}
 TRUTH_FIELDS = {"point2": 7, "angle": 3}
 
 
-def looks_like_tuc(first_words: list[str]) -> bool:
-    """Whether a file's first data line starts with a TUC measurement type.
+def looks_like_tuc(first_word: str) -> bool:
+    """Whether ``first_word``, the first word of a file's first data line, is a TUC type.
 
     Only the first line decides: a later line with an unknown type is then reported by the
     reader with its line number, not as a file of no known format.
     """
-    return bool(first_words) and (first_words[0] in INPUT_FIELDS or first_words[0] in TRUTH_FIELDS)
+    return first_word in INPUT_FIELDS or first_word in TRUTH_FIELDS
 
 
 def ground_truth_companion(path: Path) -> Path | None:

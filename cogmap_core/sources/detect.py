@@ -32,7 +32,6 @@ from cogmap_core.sources.odometry_log import (
 
 FORMATS = ("bag", "tuc", "csv")
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")
-_SNIFF_LINES = 5
 
 
 @dataclass(frozen=True)
@@ -136,12 +135,13 @@ def detect_format(path: str | Path) -> str:
         return "bag"
     if not head.strip():
         raise InputFileError(f"{path}: the file is empty; nothing to map")
+    # the first data line decides (see looks_like_tuc)
     lines = [
         line.strip()
         for line in head.decode("utf-8", errors="replace").splitlines()
         if line.strip() and not line.strip().startswith("#")
-    ][:_SNIFF_LINES]
-    if lines and looks_like_tuc([line.split()[0] for line in lines]):
+    ][:1]
+    if lines and looks_like_tuc(lines[0].split()[0]):
         return "tuc"
     if lines and looks_like_csv(lines[0]):
         return "csv"
