@@ -21,7 +21,6 @@ from app.cli_common import (
     input_kind,
     log_options_from_args,
     map_changes_from_args,
-    resolve_bag,
     topics_from_args,
 )
 from app.server.replay import BagSource, GenerationProgress, check_resumable
@@ -89,7 +88,11 @@ def _serve(args: argparse.Namespace) -> int:
             raise ParameterError(
                 "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
             )
-        bag_path = resolve_bag(args.bag, logs=False)
+        bag_path = Path(args.bag)
+        if not bag_path.exists():  # (not resolve_bag's error: its "or omit BAG" is refused here)
+            raise InputFileError(
+                f"{bag_path}: no such bag; --resume continues on an existing .bag file"
+            )
         resume = resume_session(args.resume, frontend_from_args(args, bag_path), 4, changes)
         print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     import viser
