@@ -23,10 +23,10 @@ from app.cli_common import (
     map_changes_from_args,
     topics_from_args,
 )
-from app.server.replay import BagSource, GenerationProgress, check_resumable
+from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.session_file import describe, resume_session
-from cogmap_core.sources.detect import KINDS, check_companions
+from cogmap_core.sources.detect import KINDS, check_companions, check_sessions_allowed
 
 DEFAULT_PORT = 8080
 
@@ -83,7 +83,8 @@ def _serve(args: argparse.Namespace) -> int:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
     resume = None
     if args.resume is not None:
-        check_resumable(args.bag, kind.name)  # before the session file is even read
+        # before the session file is even read
+        check_sessions_allowed(kind.name, args.bag, "--resume", "serve it without --resume")
         if args.bag is None:
             raise ParameterError(
                 "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
