@@ -282,7 +282,7 @@ class CogmapApp:
         )
 
     def _reset_label(self) -> str:
-        return "reset to paper values" if self.defaults == MapParams() else "reset to defaults"
+        return f"reset to {self._defaults_name()}"
 
     def _defaults_name(self) -> str:
         return "paper values" if self.defaults == MapParams() else "defaults"
