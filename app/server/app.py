@@ -813,13 +813,17 @@ class CogmapApp:
             self._publish_scene()
             if self._chart_limit.due(forced):
                 self._update_chart()
-        if self._views_limit.due(forced):  # each view takes the replay lock for what it reads
-            for view in list(self.views.values()):
-                try:
-                    view.refresh()
-                except Exception:  # a tab that went away must not stop the others
-                    traceback.print_exc()
+        if self._views_limit.due(forced):
+            self._refresh_views()
         self._update_status()
+
+    def _refresh_views(self) -> None:
+        """Refresh every open view; each takes the replay lock for what it reads (call unlocked)."""
+        for view in list(self.views.values()):
+            try:
+                view.refresh()
+            except Exception:  # a tab that went away must not stop the others
+                traceback.print_exc()
 
     # ------------------------------------------------------------------ page content
     def _update_figures(self, forced: bool, modes: tuple[MapMode, ...]) -> None:
@@ -897,11 +901,7 @@ class CogmapApp:
                 self.stats_version += 1
             self._publish_scene()  # the truth's alignment, the false loop closures
             self._update_counters()
-        for view in list(self.views.values()):
-            try:
-                view.refresh()
-            except Exception:
-                traceback.print_exc()
+        self._refresh_views()
 
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log
