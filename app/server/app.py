@@ -710,7 +710,7 @@ class CogmapApp:
         else:
             box.value = value
         if message is not None and self._typed.pop(spec.name, None) is not None:
-            self.params_md.content = self._params_message(message)  # (no callback ran)
+            self._param_note(Adjustment(message))  # (no callback ran)
 
     def current_slider_params(self) -> MapParams:
         """The parameters the controls show, each clamped into its slider's range.
