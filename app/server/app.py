@@ -738,13 +738,9 @@ class CogmapApp:
     def reset_params(self) -> None:
         """Back to the default parameter values (the paper's, or the log's; one rebuild)."""
         defaults = self.defaults
-        self._setting.params = True
-        try:
-            for name, slider in self.param_sliders.items():
-                slider.value = getattr(defaults, name)
-                self.param_boxes[name].value = format_value(getattr(defaults, name))
-        finally:
-            self._setting.params = False
+        for name, slider in self.param_sliders.items():
+            self._set_quietly(slider, getattr(defaults, name))
+            self._set_quietly(self.param_boxes[name], format_value(getattr(defaults, name)))
         self.params_md.content = self._params_message(self._defaults_name())
         if self.replay.params != defaults:
             self.replay.set_params(defaults)
