@@ -27,7 +27,7 @@ import app.server.app as app_module
 import app.server.view as view_module
 from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
 from app.server.export import g2o_bytes, save_html_replay, summary_dict, summary_inputs
-from app.server.figures import truth_transform
+from app.server.figures import compute_figures, figure_inputs, truth_transform
 from app.server.replay import PARAMS_USED, PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -124,6 +124,24 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
         for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
             expected += [reference.maps[mode].num_vertices, reference.maps[mode].num_edges]
         assert last == expected
+
+
+def test_figure_inputs_view_the_true_path_which_stays_as_taken(reference: SlamSession) -> None:
+    """The true path is not copied per map and round: a read-only view the log never rewrites."""
+    log = reference.log.truncated(reference.log.frames)  # a log of our own to append to
+    cmap = reference.maps[MapMode.COMPACT]
+    inputs = figure_inputs(log, cmap)
+    assert inputs.path is not None and not inputs.path.flags.writeable
+    assert np.shares_memory(inputs.path, log.ground_truth)
+    taken = inputs.path.copy()
+    figures = compute_figures(inputs)
+    for k in range(2 * log.frames + 1100):  # past the buffer's capacity: it grows (moves)
+        log.append_frame([], log.end_time + 1.0, (99.0, -99.0, float(k)))
+    assert not np.shares_memory(inputs.path, log.ground_truth)
+    np.testing.assert_array_equal(inputs.path, taken)
+    np.testing.assert_array_equal(log.ground_truth[: taken.shape[0]], taken)
+    assert compute_figures(inputs) == figures
+    assert figures.truth_transform == truth_transform(reference.log, cmap)
 
 
 def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: SlamSession) -> None:
