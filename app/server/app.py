@@ -1249,7 +1249,9 @@ class CogmapApp:
                 self._false_key = None
                 self._false_times = np.zeros(0)
                 self._odometry_key = None
-                self.replay = self._make_replay(path, params, speed, True, opened=reader)
+                self.replay = self._make_replay(  # (a bag: open_bag took it; not sniffed again)
+                    path, params, speed, True, fmt="bag", opened=reader
+                )
                 self.started_at = time.monotonic()
                 self.links_html.content = ""  # (a log's latest links)
             self.views_changed()
