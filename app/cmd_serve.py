@@ -21,13 +21,12 @@ from app.cli_common import (
     input_kind,
     log_options_from_args,
     map_changes_from_args,
-    resolve_bag,
     topics_from_args,
 )
-from app.server.replay import BagSource, GenerationProgress, check_resumable
+from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.session_file import describe, resume_session
-from cogmap_core.sources.detect import KINDS, check_companions
+from cogmap_core.sources.detect import KINDS, check_companions, check_sessions_allowed
 
 DEFAULT_PORT = 8080
 
@@ -84,12 +83,17 @@ def _serve(args: argparse.Namespace) -> int:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
     resume = None
     if args.resume is not None:
-        check_resumable(args.bag, kind.name)  # before the session file is even read
+        # before the session file is even read
+        check_sessions_allowed(kind.name, args.bag, "--resume", "serve it without --resume")
         if args.bag is None:
             raise ParameterError(
                 "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
             )
-        bag_path = resolve_bag(args.bag, logs=False)
+        bag_path = Path(args.bag)
+        if not bag_path.exists():  # (not resolve_bag's error: its "or omit BAG" is refused here)
+            raise InputFileError(
+                f"{bag_path}: no such bag; --resume continues on an existing .bag file"
+            )
         resume = resume_session(args.resume, frontend_from_args(args, bag_path), 4, changes)
         print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     import viser

@@ -27,7 +27,7 @@ import app.server.app as app_module
 import app.server.view as view_module
 from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
 from app.server.export import g2o_bytes, save_html_replay, summary_dict, summary_inputs
-from app.server.figures import truth_transform
+from app.server.figures import compute_figures, figure_inputs, truth_transform
 from app.server.replay import PARAMS_USED, PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -124,6 +124,24 @@ def test_replay_matches_the_headless_session(short_bag: Path, reference: SlamSes
         for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
             expected += [reference.maps[mode].num_vertices, reference.maps[mode].num_edges]
         assert last == expected
+
+
+def test_figure_inputs_view_the_true_path_which_stays_as_taken(reference: SlamSession) -> None:
+    """The true path is not copied per map and round: a read-only view the log never rewrites."""
+    log = reference.log.truncated(reference.log.frames)  # a log of our own to append to
+    cmap = reference.maps[MapMode.COMPACT]
+    inputs = figure_inputs(log, cmap)
+    assert inputs.path is not None and not inputs.path.flags.writeable
+    assert np.shares_memory(inputs.path, log.ground_truth)
+    taken = inputs.path.copy()
+    figures = compute_figures(inputs)
+    for k in range(2 * log.frames + 1100):  # past the buffer's capacity: it grows (moves)
+        log.append_frame([], log.end_time + 1.0, (99.0, -99.0, float(k)))
+    assert not np.shares_memory(inputs.path, log.ground_truth)
+    np.testing.assert_array_equal(inputs.path, taken)
+    np.testing.assert_array_equal(log.ground_truth[: taken.shape[0]], taken)
+    assert compute_figures(inputs) == figures
+    assert figures.truth_transform == truth_transform(reference.log, cmap)
 
 
 def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: SlamSession) -> None:
@@ -712,6 +730,10 @@ def _idle_app_with_one_viewer(bag: Path) -> Iterator[CogmapApp]:
 def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
     short_bag: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """The figures' round and the per-frame update run outside the replay lock.
+
+    Views take it briefly for what they read; the figures are computed from inputs taken under it.
+    """
     with _idle_app_with_one_viewer(short_bag) as app:
         figures, false_times = dict(app._figures), app._false_times.copy()
         assert len(figures) == len(ALL_MODES)
@@ -746,23 +768,10 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
         ]
         assert app._figures == figures
         np.testing.assert_array_equal(app._false_times, false_times)
-
-
-def test_views_follow_the_maps_without_holding_the_replay_lock(
-    short_bag: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """The per-frame update refreshes each view outside the replay lock (views take it briefly)."""
-    with _idle_app_with_one_viewer(short_bag) as app:
-        free: list[bool] = []
-        real = view_module.ClientView.refresh
-
-        def refresh(view: view_module.ClientView) -> None:
-            free.append(_lock_is_free(app.replay.lock))
-            real(view)
-
-        monkeypatch.setattr(view_module.ClientView, "refresh", refresh)
+        # the per-frame update refreshes each view outside the replay lock too
+        free.clear()
         app.on_maps(app.replay, ALL_MODES, forced=True)
-        assert free == [True]
+        assert free == [("view", True)]
 
 
 def test_html_replay_checks_its_folder_before_rendering(

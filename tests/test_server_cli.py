@@ -130,8 +130,15 @@ def test_bad_arguments_fail_fast_with_one_line(capsys: pytest.CaptureFixture[str
     err = capsys.readouterr().err.strip()
     expected = "missing_odometry.csv: no such file; give a bag, a TUC log or a CSV log"
     assert err == f"cogmap serve: error: {expected}"
+    # --resume continues on a bag: a missing one is refused, worded without "or omit BAG"
     assert main(["serve", "missing.bag", "--resume", "s.npz"]) == 2
-    assert "missing.bag: no such bag; give an existing .bag file" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    expected = "missing.bag: no such bag; --resume continues on an existing .bag file"
+    assert err == f"cogmap serve: error: {expected}"
+    assert main(["serve", "--resume", "s.npz"]) == 2
+    err = capsys.readouterr().err.strip()
+    expected = "--resume needs a bag to continue on: cogmap serve BAG --resume FILE"
+    assert err == f"cogmap serve: error: {expected}"
 
 
 def test_display_url() -> None:

@@ -20,6 +20,7 @@ from cogmap_core.config import MapParams
 from cogmap_core.evaluation import EvaluationSettings
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.sources import detect
 from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
 from tests import test_server_support as support
@@ -148,13 +149,20 @@ def test_the_page_and_the_replay_judge_a_log_with_its_own_tolerances(
 
 
 def test_opening_a_bag_after_a_log_shows_the_camera_and_the_bag_defaults(
-    square_log: Path, short_bag: Path
+    square_log: Path, short_bag: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     with running_app(square_log, params=LOG_MAP_PARAMS, defaults=LOG_MAP_PARAMS) as app:
         wait(app)
         assert not app.camera_image.visible and "cogmap-links" in app.links_html.content
+
+        def sniffed(path: object) -> str:
+            raise AssertionError(f"{path} sniffed again")
+
+        # open_bag opened it as a bag: the new replay is told so, not left to sniff the file
+        monkeypatch.setattr(detect, "detect_format", sniffed)
         assert app.open_bag(str(short_bag))
         wait(app)
+        assert app.replay.format == "bag" and app.replay.message == ""
         assert app.replay.has_camera and app.camera_image.visible
         assert app.links_html.content == ""
         # the log's parameters (alpha 2.746, link sigma 0.5 m, ...) are not carried to a bag

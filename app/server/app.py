@@ -282,7 +282,7 @@ class CogmapApp:
         )
 
     def _reset_label(self) -> str:
-        return "reset to paper values" if self.defaults == MapParams() else "reset to defaults"
+        return f"reset to {self._defaults_name()}"
 
     def _defaults_name(self) -> str:
         return "paper values" if self.defaults == MapParams() else "defaults"
@@ -710,7 +710,7 @@ class CogmapApp:
         else:
             box.value = value
         if message is not None and self._typed.pop(spec.name, None) is not None:
-            self.params_md.content = self._params_message(message)  # (no callback ran)
+            self._param_note(Adjustment(message))  # (no callback ran)
 
     def current_slider_params(self) -> MapParams:
         """The parameters the controls show, each clamped into its slider's range.
@@ -738,13 +738,9 @@ class CogmapApp:
     def reset_params(self) -> None:
         """Back to the default parameter values (the paper's, or the log's; one rebuild)."""
         defaults = self.defaults
-        self._setting.params = True
-        try:
-            for name, slider in self.param_sliders.items():
-                slider.value = getattr(defaults, name)
-                self.param_boxes[name].value = format_value(getattr(defaults, name))
-        finally:
-            self._setting.params = False
+        for name, slider in self.param_sliders.items():
+            self._set_quietly(slider, getattr(defaults, name))
+            self._set_quietly(self.param_boxes[name], format_value(getattr(defaults, name)))
         self.params_md.content = self._params_message(self._defaults_name())
         if self.replay.params != defaults:
             self.replay.set_params(defaults)
@@ -813,13 +809,17 @@ class CogmapApp:
             self._publish_scene()
             if self._chart_limit.due(forced):
                 self._update_chart()
-        if self._views_limit.due(forced):  # each view takes the replay lock for what it reads
-            for view in list(self.views.values()):
-                try:
-                    view.refresh()
-                except Exception:  # a tab that went away must not stop the others
-                    traceback.print_exc()
+        if self._views_limit.due(forced):
+            self._refresh_views()
         self._update_status()
+
+    def _refresh_views(self) -> None:
+        """Refresh every open view; each takes the replay lock for what it reads (call unlocked)."""
+        for view in list(self.views.values()):
+            try:
+                view.refresh()
+            except Exception:  # a tab that went away must not stop the others
+                traceback.print_exc()
 
     # ------------------------------------------------------------------ page content
     def _update_figures(self, forced: bool, modes: tuple[MapMode, ...]) -> None:
@@ -897,11 +897,7 @@ class CogmapApp:
                 self.stats_version += 1
             self._publish_scene()  # the truth's alignment, the false loop closures
             self._update_counters()
-        for view in list(self.views.values()):
-            try:
-                view.refresh()
-            except Exception:
-                traceback.print_exc()
+        self._refresh_views()
 
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log
@@ -1253,7 +1249,9 @@ class CogmapApp:
                 self._false_key = None
                 self._false_times = np.zeros(0)
                 self._odometry_key = None
-                self.replay = self._make_replay(path, params, speed, True, opened=reader)
+                self.replay = self._make_replay(  # (a bag: open_bag took it; not sniffed again)
+                    path, params, speed, True, fmt="bag", opened=reader
+                )
                 self.started_at = time.monotonic()
                 self.links_html.content = ""  # (a log's latest links)
             self.views_changed()

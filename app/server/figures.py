@@ -36,16 +36,18 @@ class MapFigures:
 
 @dataclass(frozen=True, slots=True)
 class FigureInputs:
-    """What a map's figures are computed from, copied out of a running replay.
+    """What a map's figures are computed from, taken out of a running replay.
 
     Taken while the replay's lock is held (:func:`figure_inputs`, a few milliseconds); the
     figures are then computed from it without the lock (:func:`compute_figures`), so the replay
     does not wait for them.
 
     Attributes:
-        map: the map's live part.
+        map: the map's live part (a copy).
         vertex_truth: the true pose at each vertex's creation time (None without truth).
-        path: the dense true path, one pose per frame (None without truth).
+        path: the dense true path, one pose per frame (None without truth): a read-only view
+            of the log's, not a copy. The log only appends (rows already logged are never
+            written again; growing it moves them to a new buffer), so the view stays as taken.
 
     """
 
@@ -55,11 +57,11 @@ class FigureInputs:
 
 
 def figure_inputs(log: EventLog, cmap: CognitiveMap) -> FigureInputs:
-    """Copy what the figures of ``cmap`` need (hold the replay's lock while calling)."""
+    """Take what the figures of ``cmap`` need (hold the replay's lock while calling)."""
     snap = cmap.snapshot()
     if not log.has_ground_truth():
         return FigureInputs(snap, None, None)
-    return FigureInputs(snap, log.truth_at(snap.vertex_time), np.array(log.ground_truth))
+    return FigureInputs(snap, log.truth_at(snap.vertex_time), log.ground_truth)
 
 
 def compute_figures(inputs: FigureInputs, judging: EvaluationSettings | None = None) -> MapFigures:

@@ -97,16 +97,6 @@ PARAMS_USED: dict[MapMode, frozenset[str]] = {
 }
 
 
-def check_resumable(path: Path | str | None, fmt: str) -> None:
-    """Refuse to continue a saved session on ``path`` unless it is a bag (format ``fmt``).
-
-    Raises:
-        ParameterError: ``path`` is a log of odometry and place recognition.
-
-    """
-    check_sessions_allowed(fmt, path, "--resume", "serve it without --resume")
-
-
 def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:
     """Whether map ``mode`` built with ``old`` can differ from one built with ``new``."""
     return any(getattr(old, name) != getattr(new, name) for name in PARAMS_USED[mode])
@@ -523,7 +513,7 @@ class Replay:
             self.bag_path = path
             fmt = resolve_format(path, self.format)
             if self.resume_meta is not None:
-                check_resumable(path, fmt)
+                check_sessions_allowed(fmt, path, "--resume", "serve it without --resume")
             reader, self._opened = self._opened, None
             if reader is None:
                 reader = open_source(

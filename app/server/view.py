@@ -409,33 +409,31 @@ class ClientView:
     def frame_camera(self, top: bool = True) -> None:
         """Point the camera at what the view shows, left of the control panel."""
         with self._lock:  # (see follow)
-            self._frame_camera(top)
-
-    def _frame_camera(self, top: bool) -> None:
-        extent = self.content_extent() or (-0.5, 3.5, -0.5, 2.5)
-        camera = self.client.camera
-        width = camera.image_width or 1280
-        height = camera.image_height or 800
-        fov = camera.fov if camera.fov > 0 else math.radians(50.0)
-        usable = max(0.35, 1.0 - PANEL_PX / width)
-        x0, x1, y0, y1 = extent
-        w, h = max(x1 - x0, 0.5) * 1.12, max(y1 - y0, 0.5) * 1.12
-        tan = math.tan(fov / 2.0)
-        distance = max(h / (2.0 * tan), w / (2.0 * tan * (width / height) * usable))
-        visible_w = 2.0 * distance * tan * (width / height)
-        cx = (x0 + x1) / 2 + (PANEL_PX / 2.0 / width) * visible_w * (1.0 if usable > 0.35 else 0)
-        cy = (y0 + y1) / 2
-        if top:
-            position = (cx, cy - 0.02 * distance, distance)
-        else:
-            position = (cx + 0.35 * distance, cy - 0.75 * distance, 0.65 * distance)
-        self._camera_expected = np.array(position)
-        self._camera_acknowledged = False
-        self._framed = extent
-        with self.client.atomic():
-            camera.up_direction = (0.0, 0.0, 1.0)
-            camera.position = position
-            camera.look_at = (cx, cy, 0.0)
+            extent = self.content_extent() or (-0.5, 3.5, -0.5, 2.5)
+            camera = self.client.camera
+            width = camera.image_width or 1280
+            height = camera.image_height or 800
+            fov = camera.fov if camera.fov > 0 else math.radians(50.0)
+            usable = max(0.35, 1.0 - PANEL_PX / width)
+            x0, x1, y0, y1 = extent
+            w, h = max(x1 - x0, 0.5) * 1.12, max(y1 - y0, 0.5) * 1.12
+            tan = math.tan(fov / 2.0)
+            distance = max(h / (2.0 * tan), w / (2.0 * tan * (width / height) * usable))
+            visible_w = 2.0 * distance * tan * (width / height)
+            shift = (PANEL_PX / 2.0 / width) * visible_w * (1.0 if usable > 0.35 else 0)
+            cx = (x0 + x1) / 2 + shift
+            cy = (y0 + y1) / 2
+            if top:
+                position = (cx, cy - 0.02 * distance, distance)
+            else:
+                position = (cx + 0.35 * distance, cy - 0.75 * distance, 0.65 * distance)
+            self._camera_expected = np.array(position)
+            self._camera_acknowledged = False
+            self._framed = extent
+            with self.client.atomic():
+                camera.up_direction = (0.0, 0.0, 1.0)
+                camera.position = position
+                camera.look_at = (cx, cy, 0.0)
 
     def follow(self) -> None:
         """Re-frame when the map grew out of the framed box or shrank to a fraction of it.
@@ -444,27 +442,24 @@ class ClientView:
         and two framings at once would each take the other's camera pose for the viewer's move.
         """
         with self._lock:
-            self._follow()
-
-    def _follow(self) -> None:
-        if not self.state.follow:
-            return
-        extent = self.content_extent()
-        framed = self._framed
-        if extent is None:
-            return
-        if framed is not None:
-            grew = (
-                extent[0] < framed[0] - 0.05
-                or extent[1] > framed[1] + 0.05
-                or extent[2] < framed[2] - 0.05
-                or extent[3] > framed[3] + 0.05
-            )
-            area = (extent[1] - extent[0]) * (extent[3] - extent[2])
-            framed_area = (framed[1] - framed[0]) * (framed[3] - framed[2])
-            if not grew and area >= 0.4 * framed_area:
+            if not self.state.follow:
                 return
-        self._frame_camera(top=True)
+            extent = self.content_extent()
+            framed = self._framed
+            if extent is None:
+                return
+            if framed is not None:
+                grew = (
+                    extent[0] < framed[0] - 0.05
+                    or extent[1] > framed[1] + 0.05
+                    or extent[2] < framed[2] - 0.05
+                    or extent[3] > framed[3] + 0.05
+                )
+                area = (extent[1] - extent[0]) * (extent[3] - extent[2])
+                framed_area = (framed[1] - framed[0]) * (framed[3] - framed[2])
+                if not grew and area >= 0.4 * framed_area:
+                    return
+            self.frame_camera(top=True)  # (the lock is re-entered)
 
     def _on_camera(self, camera: viser.CameraHandle) -> None:
         """A camera report: the viewer moved the camera (not the view): stop following the map.
