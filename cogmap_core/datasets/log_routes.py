@@ -176,7 +176,7 @@ def _back_and_forth(rng: np.random.Generator, length: float) -> Route:
 def _parallel_corridors(rng: np.random.Generator, length: float) -> Route:
     """Two or three look-alike parallel corridors joined at their ends, in random order.
 
-    At each end the robot takes another corridor (or, now and then, the same one back). A
+    At each end the robot takes another corridor (or, 30 % of the time, the same one back). A
     place in one corridor looks like the place at the same offset in each other one.
     """
     count = int(rng.integers(2, 4))
@@ -188,7 +188,7 @@ def _parallel_corridors(rng: np.random.Generator, length: float) -> Route:
         x_end = corridor * end
         b.add(x_end, lane * spacing)
         others = [c for c in range(count) if c != lane]
-        lane = lane if rng.random() < 0.15 else int(rng.choice(others))
+        lane = lane if rng.random() < 0.3 else int(rng.choice(others))
         b.add(x_end, lane * spacing)  # along the end corridor (nothing if the same lane)
         end = 1 - end
     aliases = []
