@@ -51,13 +51,13 @@ def describe(log: GeneratedLog, paths: list[str], fmt: str) -> str:
     """The summary printed after writing: files, run, odometry and loop candidates."""
     cfg = log.config
     c = log.counts()
-    minutes, seconds = divmod(log.duration, 60.0)
+    minutes, seconds = divmod(round(log.duration), 60)
     e = log.errors
     drift = cfg.drift if isinstance(cfg.drift, str) else "target"
     share = c["false"] / c["usable"] if c["usable"] else 0.0
     lines = [
         f"wrote {', '.join(paths)} ({fmt})",
-        f"  pattern {cfg.pattern}, seed {cfg.seed}: {int(minutes)} min {seconds:.0f} s, "
+        f"  pattern {cfg.pattern}, seed {cfg.seed}: {minutes} min {seconds} s, "
         f"{log.path_length:.1f} m driven at {cfg.cruise_speed:g} m/s cruise, "
         f"{log.odometry.shape[0]} odometry samples, {log.ground_truth.shape[0]} ground-truth "
         "poses",
@@ -105,7 +105,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "PREFIX_odometry.csv, PREFIX_loops.csv, PREFIX_ground_truth.csv (csv)",
     )
     parser.add_argument(
-        "--pattern", default=d.pattern, choices=PATTERNS, help=f"(default {d.pattern})"
+        "--pattern",
+        default=d.pattern,
+        choices=PATTERNS,
+        metavar="NAME",
+        help=f"driving pattern: {', '.join(PATTERNS)} (default {d.pattern})",
     )
     parser.add_argument("--seed", type=int, default=d.seed, help=f"random seed (default {d.seed})")
     parser.add_argument(
