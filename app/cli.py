@@ -47,6 +47,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "app.cmd_run",
     "app.cmd_optimize",
     "app.cmd_make_maze",
+    "app.cmd_make_log",
     "app.cmd_dataset",
     "app.cmd_sweep",
 )

@@ -112,6 +112,28 @@ def interpolate_poses(times: FloatArray, poses: FloatArray, query: FloatArray) -
     return out
 
 
+def loop_candidate_distances(
+    loops: FloatArray, truth_times: FloatArray, truth: FloatArray
+) -> FloatArray:
+    """Distance (m) between the true positions at each loop candidate's two times.
+
+    Args:
+        loops: ``(M, >=2)`` candidates: time, matched time (further columns ignored).
+        truth_times: ``(G,)`` ground-truth times, increasing.
+        truth: ``(G, >=2)`` true positions (x, y) at those times; interpolated linearly and
+            clamped at the ends, as :func:`interpolate_poses` does.
+
+    """
+    pairs = np.asarray(loops, dtype=np.float64)
+    if pairs.size == 0:
+        return np.zeros(0)
+    t = np.asarray(truth_times, dtype=np.float64)
+    xy = np.asarray(truth, dtype=np.float64)
+    dx = np.interp(pairs[:, 0], t, xy[:, 0]) - np.interp(pairs[:, 1], t, xy[:, 0])
+    dy = np.interp(pairs[:, 0], t, xy[:, 1]) - np.interp(pairs[:, 1], t, xy[:, 1])
+    return np.hypot(dx, dy)
+
+
 @dataclass(frozen=True, slots=True)
 class LoopClosureScore:
     """Loop closures judged by ground truth.

@@ -18,6 +18,7 @@ from cogmap_core.sources.odometry_log import (
     LogFormatError,
     LogReader,
     LogSourceConfig,
+    label_loop_candidates,
     log_steps,
 )
 
@@ -105,6 +106,29 @@ def test_ground_truth_is_interpolated_at_every_step(tmp_path: Path) -> None:
     assert reader.counters.warnings == []
     no_truth = open_source(path, log=LogOptions(use_ground_truth=False))
     assert all(s.ground_truth is None for s in no_truth.frames())
+
+
+def test_loop_candidates_are_labelled_by_the_true_distance_of_their_two_times(
+    tmp_path: Path,
+) -> None:
+    # true path: out along x (1 m/s) until 5 s, then back, 0.5 m to the side after 7 s
+    loops = [
+        "loop 6.0 3.0 0.2",  # x 4 and 3: 1 m apart, true at the default radius
+        "loop 6.0 2.9 0.95",  # x 4 and 2.9: 1.1 m apart, false
+        "loop 8.0 1.0 1.0",  # x 2 and 1, y 0.5 and 0: 1.118 m apart, false
+        "loop 9.5 0.5 0.9",  # x 0.5 and 0.5, y 0.5 and 0: 0.5 m apart, true
+    ]
+    path = write(tmp_path / "back_Input.txt", odom_lines() + loops)
+    truth = [f"point2 {t:g} {min(t, 10 - t):g} {0.5 if t > 7 else 0:g} 0 0 0 0" for t in range(11)]
+    write(tmp_path / "back_GT.txt", truth)
+    log = read_tuc(path)
+    assert label_loop_candidates(log).tolist() == [True, False, False, True]
+    assert label_loop_candidates(log, radius=1.11).tolist() == [True, True, False, True]
+    assert label_loop_candidates(log, radius=0.5).tolist() == [False, False, False, True]
+    with pytest.raises(ParameterError, match="radius 0 m is out of range"):
+        label_loop_candidates(log, radius=0)
+    with pytest.raises(ParameterError, match="has no ground truth"):
+        label_loop_candidates(read_tuc(path, use_ground_truth=False))
 
 
 def test_ground_truth_covering_part_of_the_run_is_dropped_with_a_warning(tmp_path: Path) -> None:

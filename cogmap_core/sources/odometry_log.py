@@ -65,7 +65,11 @@ from numpy.typing import NDArray
 
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError, ParameterError
-from cogmap_core.evaluation import EvaluationSettings, interpolate_poses
+from cogmap_core.evaluation import (
+    EvaluationSettings,
+    interpolate_poses,
+    loop_candidate_distances,
+)
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.frames import EventStep
 
@@ -241,6 +245,29 @@ class OdometryLog:
     def duration(self) -> float:
         """Seconds from the first to the last odometry sample."""
         return float(self.odometry[-1, 0] - self.odometry[0, 0])
+
+
+def label_loop_candidates(log: OdometryLog, radius: float | None = None) -> NDArray[np.bool_]:
+    """Which of a log's loop candidates are true: their two times' true places within ``radius``.
+
+    A candidate ``(time, matched time, score)`` is true when the ground-truth positions at its
+    two times (interpolated) are at most ``radius`` metres apart -- position only, the way the
+    report judges a log's loop closures (default: :data:`LOG_EVALUATION`'s 1 m). One boolean per
+    row of ``log.loops``, in that order; the score plays no part.
+
+    Raises:
+        ParameterError: the log has no ground truth, or ``radius`` is not a positive number.
+
+    """
+    radius = LOG_EVALUATION.loop_distance if radius is None else radius
+    if not (math.isfinite(radius) and radius > 0):
+        raise ParameterError(f"loop label radius {radius!r} m is out of range; use > 0 m")
+    if log.ground_truth is None:
+        raise ParameterError(
+            f"{log.path}: the log has no ground truth; loop candidates cannot be labelled"
+        )
+    truth = log.ground_truth
+    return loop_candidate_distances(log.loops, truth[:, 0], truth[:, 1:3]) <= radius
 
 
 @dataclass
