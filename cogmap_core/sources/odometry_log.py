@@ -64,10 +64,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.config import MapParams
-from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.errors import ParameterError
 from cogmap_core.evaluation import EvaluationSettings, interpolate_poses
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.frames import EventStep
+from cogmap_core.sources.log_text import LogFormatError, Rows
+
+__all__ = ["LogFormatError", "Rows"]  # re-exported: the readers' rows and error live in log_text
 
 FloatArray = NDArray[np.float64]
 
@@ -113,37 +116,6 @@ are within 1 m (twice the place recognition's 0.5 m precision), position only.""
 ODOMETRY_COLUMNS = ("time", "v", "omega")
 LOOP_COLUMNS = ("time", "matched time", "score")
 TRUTH_COLUMNS = ("time", "x", "y", "theta")
-
-
-class LogFormatError(InputFileError):
-    """A log file has a malformed line or values that break the log's rules (file:line named)."""
-
-
-def is_number(text: str) -> bool:
-    """Whether ``text`` reads as a float (the log readers' test of a field)."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def read_log_text(path: Path, expected: str) -> str:
-    """The text of a log file; ``expected`` says what its lines should be (for the messages).
-
-    Raises:
-        InputFileError: a missing or unreadable file.
-        LogFormatError: the file is not UTF-8 text.
-
-    """
-    if not path.is_file():
-        raise InputFileError(f"{path}: no such file")
-    try:
-        return path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise LogFormatError(f"{path}: not a text file; expected {expected}") from None
-    except OSError as exc:
-        raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
 
 
 @dataclass(frozen=True)
@@ -243,33 +215,14 @@ class OdometryLog:
         return float(self.odometry[-1, 0] - self.odometry[0, 0])
 
 
-@dataclass
-class Rows:
-    """Parsed rows of one kind with where each came from (``file:line``), before validation."""
-
-    what: str
-    columns: tuple[str, ...]
-    values: list[Sequence[float]] = field(default_factory=list)
-    where: list[str] = field(default_factory=list)
-
-    def add(self, values: Sequence[float], where: str) -> None:
-        """Append one row."""
-        self.values.append(values)
-        self.where.append(where)
-
-    def array(self) -> FloatArray:
-        """The rows as an ``(n, len(columns))`` array."""
-        return np.asarray(self.values, dtype=np.float64).reshape(-1, len(self.columns))
-
-
 def check_finite(rows: Rows) -> FloatArray:
-    """The rows as an array; a value that is not finite is an error naming its file:line."""
-    data = rows.array()
+    """The rows' values; a value that is not finite is an error naming its file:line."""
+    data = rows.values
     bad = ~np.isfinite(data)
     if bad.any():
         row, col = (int(v) for v in np.argwhere(bad)[0])
         raise LogFormatError(
-            f"{rows.where[row]}: {rows.what} {rows.columns[col]} is {float(data[row, col])}; "
+            f"{rows.where(row)}: {rows.what} {rows.columns[col]} is {float(data[row, col])}; "
             "every value must be a finite number -- fix or drop the line"
         )
     return data
@@ -281,7 +234,7 @@ def check_increasing(rows: Rows, data: FloatArray, hint: str) -> None:
     if back.size:
         k = int(back[0]) + 1
         raise LogFormatError(
-            f"{rows.where[k]}: {rows.what} time {data[k, 0]:.6f} s is earlier than the previous "
+            f"{rows.where(k)}: {rows.what} time {data[k, 0]:.6f} s is earlier than the previous "
             f"({data[k - 1, 0]:.6f} s); {hint}"
         )
 
@@ -304,7 +257,7 @@ def make_odometry_log(
 
     """
     notes = list(warnings)
-    if not odometry.values:
+    if not len(odometry):
         raise LogFormatError(
             f"{path}: no odometry in the file; a log needs {odometry.what} lines "
             f"({', '.join(odometry.columns)})"
@@ -314,7 +267,7 @@ def make_odometry_log(
     t_first, t_last = float(odo[0, 0]), float(odo[-1, 0])
     loop = check_finite(loops)
     for k, (t, matched, score) in enumerate(loop.tolist()):
-        where = loops.where[k]
+        where = loops.where(k)
         if not 0.0 <= score <= 1.0:
             raise LogFormatError(
                 f"{where}: loop score {score!r} is outside [0, 1] (1 = most similar); "
@@ -335,7 +288,8 @@ def make_odometry_log(
                 f"{where}: loop at {t:.6f} s matches {matched:.6f} s, which is not earlier; "
                 "a loop closes on a place visited before"
             )
-    loop = loop[np.argsort(loop[:, 0], kind="stable")] if loop.size else loop.reshape(0, 3)
+    if (np.diff(loop[:, 0]) < 0).any():  # (no copy of a log that is in order)
+        loop = loop[np.argsort(loop[:, 0], kind="stable")]
     gt = None
     heading_known = True
     if truth is not None:
@@ -349,10 +303,10 @@ def _ground_truth(
     truth: Rows, path: Path, t_first: float, t_last: float
 ) -> tuple[FloatArray | None, bool, str]:
     """Validated ground truth covering the run, or None with the reason (a warning)."""
-    if not truth.values:
+    if not len(truth):
         return None, True, f"{path}: no ground truth in the file; the report has no accuracy"
-    if len(truth.columns) == 4 and np.isnan(truth.array()[:, 3]).all():
-        truth = Rows(truth.what, truth.columns[:3], [v[:3] for v in truth.values], truth.where)
+    if len(truth.columns) == 4 and np.isnan(truth.values[:, 3]).all():
+        truth = truth.with_values(truth.values[:, :3], truth.columns[:3])
     data = check_finite(truth)
     check_increasing(truth, data, "ground truth must be in time order")
     heading_known = data.shape[1] == 4
