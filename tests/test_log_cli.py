@@ -250,6 +250,11 @@ def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
             "c.txt:51: loop matches time -1.000000 s, before the data starts",
         ),
         (
+            "only comments",
+            [str(write(tmp / "n.txt", ["# odometry to follow", ""]))],
+            "n.txt: the file holds only comments and blank lines; nothing to map",
+        ),
+        (
             "NaN value",
             [str(write(tmp / "d.txt", [*ODOM[:5], "odom2 0.5 nan 0 0 0 0 0"]))],
             "d.txt:6: odometry v is nan",
@@ -332,3 +337,27 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, square_log: Path, caps
         assert len(lines) == 1 and message in lines[0], (case, err)
         assert lines[0].startswith("cogmap run: error: ")
         assert not out.exists(), case
+
+
+def run_log(tmp: Path, name: str, data: bytes, capsys) -> tuple[int, list[str], dict]:
+    """``cogmap run`` on a log written as ``data``: exit code, warning lines, summary."""
+    path = tmp / name
+    path.write_bytes(data)
+    out = tmp / f"out-{name}"
+    code = main(["run", str(path), "--out", str(out)])
+    printed = capsys.readouterr().out.splitlines()
+    warnings = [line.removeprefix("warning: ") for line in printed if line.startswith("warning:")]
+    summary = json.loads((out / "summary.json").read_text()) if code == 0 else {}
+    return code, warnings, summary
+
+
+LONG = [f"odom2 {k / 10:.1f} 0.5 0 0 0 0 0" for k in range(300)]  # 15 m straight in 29.9 s
+
+
+def test_a_log_with_a_bom_and_crlf_is_detected_and_mapped(tmp_path: Path, capsys) -> None:
+    body = "\r\n".join(line + " \t" for line in [*LONG, "loop 25 5 0.9"])
+    code, warnings, summary = run_log(
+        tmp_path, "bom_Input.txt", b"\xef\xbb\xbf" + body.encode() + b"\r\n", capsys
+    )
+    assert (code, warnings) == (0, [])
+    assert summary["frames"] == 300 and summary["source"]["links"] == 1
