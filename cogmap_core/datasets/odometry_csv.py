@@ -171,7 +171,7 @@ def read_odometry_csv(
     odometry = read_csv_rows(path, ODOMETRY_FORMAT)
     warnings = []
     loop_path = Path(loops) if loops is not None else companion(path, "loops")
-    loop_rows = Rows.empty("loop", LOOP_COLUMNS, path)
+    loop_rows = None
     if loop_path is None:
         beside = path.name.replace("odometry", "loops", 1) if "odometry" in path.name else None
         where = f"or put {beside} beside it" if beside else "or name the files *odometry*.csv"
