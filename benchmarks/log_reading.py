@@ -1,8 +1,9 @@
 """Reading odometry + place-recognition logs: speed and peak memory of the TUC reader.
 
 Generates TUC input files in a temporary folder (never in the repository), reads each in a fresh
-child process (``read_tuc``, no ground truth) and prints lines per second, the read time and the
-child's peak resident memory. Cases:
+child process (``read_tuc``, no ground truth) and prints the read's wall and CPU time (the machine
+may be shared: CPU time is the steadier figure), lines per second and the child's peak resident
+memory. Cases:
 
 - ``loops N``: N lines, 99 % ``loop`` lines (a hostile probe's shape: a place recognition that
   reports every candidate it compared), 1 % ``odom2`` lines at 10 Hz spanning their times;
@@ -33,12 +34,12 @@ import numpy as np
 CHILD = """
 import resource, sys, time
 from cogmap_core.datasets.tuc import read_tuc
-t = time.perf_counter()
+t, cpu = time.perf_counter(), time.process_time()
 log = read_tuc(sys.argv[1], use_ground_truth=False)
-dt = time.perf_counter() - t
+dt, cpu = time.perf_counter() - t, time.process_time() - cpu
 rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 dropped = sum(getattr(log, "read_counts", {}).get(k, 0) for k in ("loops_same_view",))
-print(dt, rss, log.odometry.shape[0], log.loops.shape[0] + dropped)
+print(dt, cpu, rss, log.odometry.shape[0], log.loops.shape[0] + dropped)
 """
 
 
@@ -97,15 +98,16 @@ def write_lecture_hall(path: Path, source: Path, n: int) -> None:
             copy += 1
 
 
-def read_in_child(path: Path) -> tuple[float, float, int, int]:
-    """Seconds, peak RSS (MB), odometry samples and loop lines of reading ``path`` afresh."""
+def read_in_child(path: Path) -> tuple[float, float, float, int, int]:
+    """Wall and CPU seconds, peak RSS (MB), odometry samples and loop lines of reading ``path``
+    in a new process."""
     result = subprocess.run(
         [sys.executable, "-c", CHILD, str(path)], capture_output=True, text=True, check=False
     )
     if result.returncode != 0:
         raise SystemExit(f"reading {path} failed:\n{result.stderr}")
-    dt, rss, odo, loops = result.stdout.split()
-    return float(dt), float(rss), int(odo), int(loops)
+    dt, cpu, rss, odo, loops = result.stdout.split()
+    return float(dt), float(cpu), float(rss), int(odo), int(loops)
 
 
 def lecture_hall(source: Path) -> None:
@@ -143,7 +145,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = args.keep or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
-        print(f"{'case':24} {'lines':>10} {'MB':>7} {'read s':>7} {'lines/s':>10} {'peak MB':>8}")
+        print(
+            f"{'case':14} {'lines':>10} {'MB':>6} {'read s':>7} {'CPU s':>6} {'lines/s':>10} "
+            f"{'peak MB':>8}"
+        )
         for n in sizes:
             cases = [("loops", write_loops)]
             if source.is_file():
@@ -153,9 +158,11 @@ def main() -> None:
                 if not (args.keep and path.is_file()):
                     write(path, n)
                 size = path.stat().st_size / 1e6
-                dt, rss, odo, loops = read_in_child(path)
+                dt, cpu, rss, odo, loops = read_in_child(path)
                 assert odo + loops == n, (odo, loops, n)
-                print(f"{name:24} {n:10d} {size:7.0f} {dt:7.2f} {n / dt:10.0f} {rss:8.0f}")
+                print(
+                    f"{name:14} {n:10d} {size:6.0f} {dt:7.2f} {cpu:6.2f} {n / dt:10.0f} {rss:8.0f}"
+                )
                 if not args.keep:
                     path.unlink()
     if source.is_file():

@@ -165,3 +165,23 @@ def test_lines_are_numbered_across_every_kind_of_line_end(tmp_path: Path) -> Non
     path.write_bytes(b"odom2 0 1 0 0 0 0 0\rodom2 1 1 0 0 0 0 0\r\n\nodom2 2 x 0 0 0 0 0\n")
     with pytest.raises(LogFormatError, match=re.escape(f"{path}:4: 'x' in a 'odom2' line")):
         read_tuc(path)
+
+
+def test_a_file_of_more_rows_than_the_cap_is_refused_at_that_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(log_text, "MAX_ROWS", 10)
+    monkeypatch.setattr(log_text, "BLOCK", 64)  # the cap is crossed inside a block
+    path = tmp_path / "big_Input.txt"
+    lines = ["# twelve rows"] + [f"odom2 {k} 0.5 0 0 0 0 0" for k in range(6)]
+    lines += [f"loop {k + 3} 1 0.5" for k in range(6)]
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(LogFormatError) as caught:
+        read_tuc(path)
+    assert str(caught.value) == (
+        f"{path}:12: more than 10 measurement lines, the most a log may have (about 1.6 GB of "
+        "arrays); split the log or leave out what the map does not use (loop candidates below "
+        "the score threshold)"
+    )
+    monkeypatch.setattr(log_text, "MAX_ROWS", 12)
+    assert read_tuc(path).loops.shape == (6, 3)
