@@ -189,8 +189,8 @@ class Block:
         self.tstart = change[0::2]
         self.tend = change[1::2]
         before = np.searchsorted(self.tstart, ends)  # tokens before each line end
-        self.counts = np.diff(before, prepend=0)
-        self.first = before - self.counts
+        self.first = np.concatenate(([0], before[:-1])) if before.size else before
+        self.counts = before - self.first
         self.odd = np.zeros(ends.size, bool)
         self.odd[np.searchsorted(ends, self.strange)] = True
 
@@ -417,7 +417,8 @@ def _read_block(
     width = block.counts - offset
     fits = np.zeros(block.lines, bool)
     for k, spec in enumerate(fmt.kinds):
-        fits |= (kind == k) & np.isin(width, spec.widths)
+        for w in spec.widths:
+            fits |= (kind == k) & (width == w)
     block.odd |= (kind >= 0) & ~fits
     kind = np.where(block.odd, -1, kind)
     # the numbers of the lines the array code takes: check every one, parse the kept ones
@@ -502,11 +503,12 @@ def _numbers(block: Block, check: IntArray, parse: IntArray) -> tuple[BoolArray,
     sign = (ch == 45) | (ch == 43)
     bad = np.zeros(ntok, bool)
     bad[tok[~(dot | exp | sign)]] = True
-    dots = np.bincount(tok[dot], minlength=ntok)
-    bad |= dots > 1
-    has_dot = dots == 1
+    dot_tok = tok[dot]  # (sorted: a token with two dots appears twice in a row)
+    bad[dot_tok[1:][dot_tok[1:] == dot_tok[:-1]]] = True
+    has_dot = np.zeros(ntok, bool)
+    has_dot[dot_tok] = True
     dot_at = np.zeros(ntok, np.int64)
-    dot_at[tok[dot]] = other[dot]
+    dot_at[dot_tok] = other[dot]
     # signs: first in the token, or right after its e
     at_sign, sign_tok = other[sign], tok[sign]
     after_e = ((buf[np.maximum(at_sign - 1, 0)] | 32) == 101) & (at_sign > tstart[sign_tok])
@@ -518,12 +520,12 @@ def _numbers(block: Block, check: IntArray, parse: IntArray) -> tuple[BoolArray,
     negative[sign_tok[lead == 1]] = buf[at_sign[lead == 1]] == 45
     mantissa_end = tend.copy()
     exp_digits = np.ones(ntok, np.int64)
-    with_exp = np.flatnonzero(np.bincount(tok[exp], minlength=ntok))
+    exp_tok = tok[exp]
+    with_exp = np.unique(exp_tok)
     if with_exp.size:
-        exps = np.bincount(tok[exp], minlength=ntok)
-        bad |= exps > 1
+        bad[exp_tok[1:][exp_tok[1:] == exp_tok[:-1]]] = True
         exp_at = np.zeros(ntok, np.int64)
-        exp_at[tok[exp]] = other[exp]
+        exp_at[exp_tok] = other[exp]
         at = exp_at[with_exp]
         mantissa_end[with_exp] = at
         bad[with_exp] |= has_dot[with_exp] & (dot_at[with_exp] > at)
