@@ -276,9 +276,15 @@ def check_increasing(rows: Rows, data: FloatArray, hint: str) -> None:
 
 
 def count_note(rows: Rows, mask: BoolArray, what: str) -> str:
-    """``"N x <what> (first at file:line)"`` for the rows in ``mask`` (at least one)."""
+    """``"N x <what> (first at file:line)"`` for the rows in ``mask`` (at least one).
+
+    Without line numbers (a log made in code, not read), the note names no line.
+    """
+    count = int(np.count_nonzero(mask))
+    if rows.lines.shape[0] != mask.shape[0]:
+        return f"{count} x {what}"
     first = int(np.flatnonzero(mask)[np.argmin(rows.lines[mask])])
-    return f"{int(np.count_nonzero(mask))} x {what} (first at {rows.where(first)})"
+    return f"{count} x {what} (first at {rows.where(first)})"
 
 
 def make_odometry_log(
