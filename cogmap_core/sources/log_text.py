@@ -339,7 +339,7 @@ def _settle_allocator() -> None:
     """
     global _allocator_settled
     if not _allocator_settled:
-        np.ones(30 << 20, np.uint8)  # made and freed at once
+        np.empty(30 << 20, np.uint8)  # made and freed at once
         _allocator_settled = True
 
 
