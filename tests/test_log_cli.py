@@ -245,9 +245,14 @@ def bad_inputs(tmp: Path, square_log: Path) -> list[tuple[str, list[str], str]]:
             "b.txt:3: odometry time 0.100000 s is earlier than the previous (0.200000 s)",
         ),
         (
-            "loop before the data",
-            [str(write(tmp / "c.txt", [*ODOM, "loop 4 -1 0.9"]))],
-            "c.txt:51: loop matches time -1.000000 s, before the data starts",
+            "loop with a score out of range",
+            [str(write(tmp / "c.txt", [*ODOM, "loop 4 1 1.2"]))],
+            "c.txt:51: loop score 1.2 is outside [0, 1] (1 = most similar)",
+        ),
+        (
+            "only comments",
+            [str(write(tmp / "n.txt", ["# odometry to follow", ""]))],
+            "n.txt: the file holds only comments and blank lines; nothing to map",
         ),
         (
             "NaN value",
@@ -332,3 +337,71 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, square_log: Path, caps
         assert len(lines) == 1 and message in lines[0], (case, err)
         assert lines[0].startswith("cogmap run: error: ")
         assert not out.exists(), case
+
+
+def run_log(tmp: Path, name: str, data: bytes, capsys) -> tuple[int, list[str], dict]:
+    """``cogmap run`` on a log written as ``data``: exit code, warning lines, summary."""
+    path = tmp / name
+    path.write_bytes(data)
+    out = tmp / f"out-{name}"
+    code = main(["run", str(path), "--out", str(out)])
+    printed = capsys.readouterr().out.splitlines()
+    warnings = [line.removeprefix("warning: ") for line in printed if line.startswith("warning:")]
+    summary = json.loads((out / "summary.json").read_text()) if code == 0 else {}
+    return code, warnings, summary
+
+
+LONG = [f"odom2 {k / 10:.1f} 0.5 0 0 0 0 0" for k in range(300)]  # 15 m straight in 29.9 s
+
+
+def test_a_log_with_loops_at_its_edges_is_mapped(tmp_path: Path, capsys) -> None:
+    """Real logs end with loop candidates just after the last odometry line, match their own
+    view, or state the later time second: all refused today; now used or dropped and counted."""
+    loops = [
+        "loop 30.1 2 0.9",  # 0.2 s after the last odometry: moved onto it, linked
+        "loop 40 2 0.9",  # 10 s after: dropped
+        "loop 20 -0.5 0.9",  # matches 0.5 s before the data: moved onto it, linked
+        "loop 10 10 0.9",  # matches its own view: dropped
+        "loop 5 25 0.9",  # the later time second: swapped, linked
+    ]
+    path = tmp_path / "edges_Input.txt"
+    code, warnings, summary = run_log(
+        tmp_path, path.name, ("\n".join(LONG + loops) + "\n").encode(), capsys
+    )
+    assert code == 0
+    assert warnings == [
+        f"1 x loop candidate matching a view less than 1 s from its own: dropped (first at "
+        f"{path}:304)",
+        f"1 x loop candidate matching a later time: the two swapped (the later view matches the "
+        f"earlier place) (first at {path}:305)",
+        f"2 x loop candidate with a time up to 1 s outside the odometry (0.000-29.900 s): moved "
+        f"onto it (first at {path}:301)",
+        f"1 x loop candidate with a time more than 1 s outside the odometry (0.000-29.900 s): "
+        f"dropped (first at {path}:302)",
+    ]
+    assert summary["read_warnings"] == {"warnings": warnings}
+    source = summary["source"]
+    assert (source["loops_same_view"], source["loops_swapped"]) == (1, 1)
+    assert (source["loops_clamped"], source["loops_outside"]) == (2, 1)
+    assert (source["loop_candidates"], source["links"]) == (4, 3)
+    assert summary["loop_closures"]["total"] == 3
+
+
+def test_a_log_with_a_bom_and_crlf_is_detected_and_mapped(tmp_path: Path, capsys) -> None:
+    body = "\r\n".join(line + " \t" for line in [*LONG, "loop 25 5 0.9"])
+    code, warnings, summary = run_log(
+        tmp_path, "bom_Input.txt", b"\xef\xbb\xbf" + body.encode() + b"\r\n", capsys
+    )
+    assert (code, warnings) == (0, [])
+    assert summary["frames"] == 300 and summary["source"]["links"] == 1
+
+
+def test_a_log_without_loops_is_mapped_with_a_warning(tmp_path: Path, capsys) -> None:
+    code, warnings, summary = run_log(
+        tmp_path, "solo_Input.txt", ("\n".join(LONG) + "\n").encode(), capsys
+    )
+    assert code == 0
+    assert warnings == [
+        f"{tmp_path / 'solo_Input.txt'}: no loop candidates: the map is its odometry"
+    ]
+    assert summary["maps"]["standard"]["vertices"] > 1 and summary["source"]["links"] == 0

@@ -11,24 +11,35 @@ A user of any odometry and place recognition writes (comma separated, an optiona
 
 The loop and ground-truth files are given explicitly or found beside the odometry file by
 replacing the word ``odometry`` in its name: ``run1_odometry.csv`` comes with
-``run1_loops.csv`` and ``run1_ground_truth.csv``. Every malformed line is an error naming file
-and line.
+``run1_loops.csv`` and ``run1_ground_truth.csv``. Lines are read by
+:mod:`cogmap_core.sources.log_text` (fast, bounded memory; blanks around fields, blank lines, CRLF
+line ends and a byte-order mark are fine); every malformed line is an error naming file and
+line.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+from cogmap_core.sources.log_text import (
+    Block,
+    IntArray,
+    LineFormat,
+    LineKind,
+    LogFormatError,
+    Parsed,
+    Rows,
+    is_number,
+    read_rows,
+)
 from cogmap_core.sources.odometry_log import (
     LOOP_COLUMNS,
     ODOMETRY_COLUMNS,
     TRUTH_COLUMNS,
-    LogFormatError,
     OdometryLog,
-    Rows,
-    is_number,
     make_odometry_log,
-    read_log_text,
 )
 
 
@@ -50,47 +61,89 @@ def looks_like_csv(first_line: str) -> bool:
     return "," in first_line and len(fields) in (3, 4) and all(fields)
 
 
-def read_rows(path: Path, rows: Rows, widths: tuple[int, ...]) -> Rows:
-    """Read a CSV file of ``widths`` columns (an optional header line) into ``rows``.
+class CsvFormat(LineFormat):
+    """CSV lines of one kind: numbers separated by commas, an optional header line.
 
-    Raises:
-        InputFileError: a missing or unreadable file.
-        LogFormatError: a row of another width, or a field that is not a number.
+    Args:
+        kind: what the file holds (its ``widths``: the column counts a row may have).
 
     """
-    text = read_log_text(path, "CSV lines")
-    expect = " or ".join(str(w) for w in widths)
-    names = ",".join(rows.columns)
-    first = True
-    for line_no, line in enumerate(text.splitlines(), start=1):
-        stripped = line.strip()
+
+    expected = "CSV lines"
+    commas = True
+
+    def __init__(self, kind: LineKind) -> None:
+        """A format of one kind of row."""
+        self.kinds = (kind,)
+
+    def classify(self, block: Block) -> tuple[IntArray, IntArray]:
+        """Rows whose fields are one comma apart; odd: any other use of commas."""
+        ntok = block.tstart.size
+        has = block.counts > 0
+        commas_before = np.zeros(ntok, np.int64)
+        if block.commas is not None and block.commas.size:
+            line = np.searchsorted(block.ends, block.commas)
+            after = np.searchsorted(block.tstart, block.commas)  # the token after the comma
+            nxt = np.minimum(after, max(ntok - 1, 0))
+            between = (
+                (after < ntok) & (block.line_of(nxt) == line) & (nxt != block.first[line])
+                if ntok
+                else np.zeros(line.size, bool)
+            )
+            block.odd[line[~between]] = True  # before the first field, after the last, alone
+            commas_before = np.bincount(nxt[between], minlength=ntok)
+        later = np.ones(ntok, bool)
+        later[block.first[has]] = False
+        block.odd[block.line_of(np.flatnonzero(later & (commas_before != 1)))] = True
+        kind = np.where(has & (block.first_bytes() != ord("#")), 0, -1)
+        return kind, np.zeros(block.lines, np.int64)
+
+    def reference(self, text: str, where: str, first: bool) -> tuple[Parsed, bool]:
+        """One line by the CSV rules (module doc)."""
+        stripped = text.strip()
         if not stripped or stripped.startswith("#"):
-            continue
+            return None, False
+        kind = self.kinds[0]
         fields = _split(stripped)
+        expect = " or ".join(str(w) for w in kind.widths)
+        names = ",".join(kind.columns)
         if first and not all(is_number(f) for f in fields):
-            first = False
-            if len(fields) not in widths:
+            if len(fields) not in kind.widths:
                 raise LogFormatError(
-                    f"{path}:{line_no}: header has {len(fields)} columns; {rows.what} files have "
+                    f"{where}: header has {len(fields)} columns; {kind.what} files have "
                     f"{expect} ({names})"
                 )
-            continue  # the header
-        first = False
-        if len(fields) not in widths:
+            return None, True  # the header
+        if len(fields) not in kind.widths:
             raise LogFormatError(
-                f"{path}:{line_no}: {len(fields)} columns; {rows.what} files have {expect} "
-                f"({names}) -- fix or drop the line"
+                f"{where}: {len(fields)} columns; {kind.what} files have {expect} ({names}) -- "
+                "fix or drop the line"
             )
         try:
             values = [float(f) for f in fields]
         except ValueError:
             bad = next(f for f in fields if not is_number(f))
             raise LogFormatError(
-                f"{path}:{line_no}: {bad!r} is not a number ({rows.what} columns {names})"
+                f"{where}: {bad!r} is not a number ({kind.what} columns {names})"
             ) from None
-        if len(values) < len(rows.columns):
-            values.append(float("nan"))  # no heading: filled in from the direction of travel
-        rows.add(values, f"{path}:{line_no}")
+        return (0, self.kept(kind, values)), True
+
+
+ODOMETRY_FORMAT = CsvFormat(LineKind("", "odometry", ODOMETRY_COLUMNS, (3,), (0, 1, 2)))
+LOOP_FORMAT = CsvFormat(LineKind("", "loop", LOOP_COLUMNS, (3,), (0, 1, 2)))
+# no heading: NaN, filled in from the direction of travel
+TRUTH_FORMAT = CsvFormat(LineKind("", "ground truth", TRUTH_COLUMNS, (3, 4), (0, 1, 2, 3)))
+
+
+def read_csv_rows(path: Path, fmt: CsvFormat) -> Rows:
+    """The rows of a CSV file of ``fmt``'s kind (an optional header line).
+
+    Raises:
+        InputFileError: a missing or unreadable file.
+        LogFormatError: a row of another width, or a field that is not a number.
+
+    """
+    (rows,) = read_rows(path, fmt)
     return rows
 
 
@@ -115,10 +168,10 @@ def read_odometry_csv(
 
     """
     path = Path(path)
-    odometry = read_rows(path, Rows("odometry", ODOMETRY_COLUMNS), (3,))
+    odometry = read_csv_rows(path, ODOMETRY_FORMAT)
     warnings = []
     loop_path = Path(loops) if loops is not None else companion(path, "loops")
-    loop_rows = Rows("loop", LOOP_COLUMNS)
+    loop_rows = None
     if loop_path is None:
         beside = path.name.replace("odometry", "loops", 1) if "odometry" in path.name else None
         where = f"or put {beside} beside it" if beside else "or name the files *odometry*.csv"
@@ -126,12 +179,12 @@ def read_odometry_csv(
             f"{path}: no loop file (give --loops FILE {where}); the maps are odometry only"
         )
     else:
-        read_rows(loop_path, loop_rows, (3,))
+        loop_rows = read_csv_rows(loop_path, LOOP_FORMAT)
     truth = None
     truth_path = None
     if use_ground_truth:
         truth_path = Path(ground_truth) if ground_truth is not None else None
         truth_path = truth_path or companion(path, "ground_truth")
         if truth_path is not None:
-            truth = read_rows(truth_path, Rows("ground truth", TRUTH_COLUMNS), (3, 4))
+            truth = read_csv_rows(truth_path, TRUTH_FORMAT)
     return make_odometry_log(path, "csv", odometry, loop_rows, truth, truth_path, warnings)

@@ -9,28 +9,36 @@ One measurement per line, whitespace separated, the first word naming its type:
 
 ``X_Input.txt`` comes with ``X_GT.txt`` beside it; that file is read as the ground truth unless
 another one is given. Covariances and ``vy`` are read but not used (the map's motion model has
-no lateral velocity). Every malformed line is an error naming file and line.
+no lateral velocity). Lines are read by :mod:`cogmap_core.sources.log_text` (fast, bounded
+memory; blank lines, ``#`` comments, CRLF line ends and a byte-order mark are fine); every
+malformed line is an error naming file and line.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from cogmap_core.sources.log_text import (
+    Block,
+    IntArray,
+    LineFormat,
+    LineKind,
+    LogFormatError,
+    Parsed,
+    Rows,
+    is_number,
+    read_rows,
+)
 from cogmap_core.sources.odometry_log import (
     LOOP_COLUMNS,
     ODOMETRY_COLUMNS,
     TRUTH_COLUMNS,
-    LogFormatError,
     OdometryLog,
-    Rows,
     check_finite,
     check_increasing,
-    is_number,
     make_odometry_log,
-    read_log_text,
 )
 
 #: The first word of a line -> how many numbers follow it.
@@ -56,41 +64,76 @@ def ground_truth_companion(path: Path) -> Path | None:
     return candidate if candidate.is_file() else None
 
 
-def _numbers(path: Path, line_no: int, words: list[str], expected: int) -> list[float]:
-    kind = words[0]
-    if len(words) - 1 != expected:
-        raise LogFormatError(
-            f"{path}:{line_no}: each '{kind}' line has {expected} numbers after the type, this one "
-            f"{len(words) - 1}; fix or drop the line"
-        )
-    try:
-        return [float(w) for w in words[1:]]
-    except ValueError:
-        bad = next(w for w in words[1:] if not is_number(w))
-        raise LogFormatError(
-            f"{path}:{line_no}: {bad!r} in a '{kind}' line is not a number; fix or drop the line"
-        ) from None
+class TucFormat(LineFormat):
+    """TUC lines: a type word, then its numbers, separated by blanks.
 
+    Args:
+        kinds: the measurement types the file may hold.
+        holds: which ones, for the message about a line of another type.
 
-def _measurements(
-    path: Path, fields: dict[str, int], holds: str
-) -> Iterator[tuple[str, str, list[float]]]:
-    """``(kind, "file:line", numbers)`` of each measurement line of a TUC file.
-
-    ``fields`` are the measurement types the file may hold; ``holds`` says which, for the
-    message about a line of another type.
     """
-    text = read_log_text(path, "TUC measurement lines")
-    for line_no, line in enumerate(text.splitlines(), start=1):
-        words = line.split()
+
+    expected = "TUC measurement lines"
+
+    def __init__(self, kinds: tuple[LineKind, ...], holds: str) -> None:
+        """A format of these kinds."""
+        self.kinds = kinds
+        self.holds = holds
+        self._index = {kind.name: k for k, kind in enumerate(kinds)}
+
+    def classify(self, block: Block) -> tuple[IntArray, IntArray]:
+        """Per line: the kind its first word names (-1: blank, comment or another word)."""
+        kind = np.full(block.lines, -1, np.int64)
+        lines = np.flatnonzero((block.counts > 0) & (block.first_bytes() != ord("#")))
+        found = np.zeros(lines.size, bool)
+        first = block.first[lines]
+        for k, spec in enumerate(self.kinds):
+            named = block.token_is(first, spec.name.encode())
+            kind[lines[named]] = k
+            found |= named
+        block.odd[lines[~found]] = True  # the reference parser names the unknown type
+        return kind, np.ones(block.lines, np.int64)
+
+    def reference(self, text: str, where: str, first: bool) -> tuple[Parsed, bool]:
+        """One line by the TUC rules (module doc)."""
+        words = text.split()
         if not words or words[0].startswith("#"):
-            continue
+            return None, False
         kind = words[0]
-        if kind not in fields:
+        k = self._index.get(kind)
+        if k is None:
+            raise LogFormatError(f"{where}: unknown measurement type {kind!r}; a TUC {self.holds}")
+        expected = self.kinds[k].widths[0]
+        if len(words) - 1 != expected:
             raise LogFormatError(
-                f"{path}:{line_no}: unknown measurement type {kind!r}; a TUC {holds}"
+                f"{where}: each '{kind}' line has {expected} numbers after the type, this one "
+                f"{len(words) - 1}; fix or drop the line"
             )
-        yield kind, f"{path}:{line_no}", _numbers(path, line_no, words, fields[kind])
+        try:
+            values = [float(w) for w in words[1:]]
+        except ValueError:
+            bad = next(w for w in words[1:] if not is_number(w))
+            raise LogFormatError(
+                f"{where}: {bad!r} in a '{kind}' line is not a number; fix or drop the line"
+            ) from None
+        return (k, self.kept(self.kinds[k], values)), True
+
+
+INPUT_FORMAT = TucFormat(
+    (
+        # covariances and vy are read (and checked) but not kept
+        LineKind("odom2", "odometry", ODOMETRY_COLUMNS, (7,), (0, 1, 3)),
+        LineKind("loop", "loop", LOOP_COLUMNS, (3,), (0, 1, 2)),
+    ),
+    "input file has 'odom2' and 'loop' lines",
+)
+TRUTH_FORMAT = TucFormat(
+    (
+        LineKind("point2", "ground truth", TRUTH_COLUMNS[:3], (7,), (0, 1, 2)),
+        LineKind("angle", "ground-truth angle", ("time", "theta"), (3,), (0, 1)),
+    ),
+    "ground-truth file has 'point2' (and 'angle') lines",
+)
 
 
 def read_tuc(
@@ -109,14 +152,7 @@ def read_tuc(
 
     """
     path = Path(path)
-    odometry = Rows("odometry", ODOMETRY_COLUMNS)
-    loops = Rows("loop", LOOP_COLUMNS)
-    holds = "input file has 'odom2' and 'loop' lines"
-    for kind, where, values in _measurements(path, INPUT_FIELDS, holds):
-        if kind == "odom2":
-            odometry.add((values[0], values[1], values[3]), where)
-        else:
-            loops.add(values, where)
+    odometry, loops = read_rows(path, INPUT_FORMAT)
     truth_path = None
     truth = None
     if use_ground_truth:
@@ -129,23 +165,10 @@ def read_tuc(
 
 def read_tuc_ground_truth(path: Path) -> Rows:
     """The ``point2`` positions of a TUC ground-truth file, with ``angle`` headings if present."""
-    points = Rows("ground truth", TRUTH_COLUMNS[:3])
-    angles = Rows("ground-truth angle", ("time", "theta"))
-    holds = "ground-truth file has 'point2' (and 'angle') lines"
-    for kind, where, values in _measurements(path, TRUTH_FIELDS, holds):
-        if kind == "point2":
-            points.add(values[:3], where)
-        else:
-            angles.add(values[:2], where)
-    if not angles.values or not points.values:
+    points, angles = read_rows(path, TRUTH_FORMAT)
+    if not len(angles) or not len(points):
         return points
     angle = check_finite(angles)
     check_increasing(angles, angle, "sort the file by time")
-    times = np.asarray([v[0] for v in points.values], dtype=np.float64)
-    theta = np.interp(times, angle[:, 0], np.unwrap(angle[:, 1]))
-    full = Rows("ground truth", TRUTH_COLUMNS)
-    for (values, where), th in zip(
-        zip(points.values, points.where, strict=True), theta.tolist(), strict=True
-    ):
-        full.add((*values, th), where)
-    return full
+    theta = np.interp(points.values[:, 0], angle[:, 0], np.unwrap(angle[:, 1]))
+    return points.with_values(np.column_stack([points.values, theta]), TRUTH_COLUMNS)

@@ -4,7 +4,8 @@ Kinds: ``bag`` (a ROS bag with camera, odometry and ground truth: the RatSLAM fr
 it), ``tuc`` (a TUC SLAM dataset input file) and ``csv`` (plain CSV odometry with loop and
 ground-truth files beside it). :func:`detect_format` looks at the content: a ROS1 bag starts
 with ``#ROSBAG``, a ROS2 bag is a folder or an ``.mcap``/``.db3`` file, a TUC file's lines start
-with ``odom2``/``loop``, a CSV file's with three comma-separated fields.
+with ``odom2``/``loop``, a CSV file's with three comma-separated fields (the first line that is
+not blank or a ``#`` comment decides; a UTF-8 byte-order mark is skipped).
 
 Each kind brings its defaults (:class:`InputKind`): the map parameters and the tolerances the
 report judges with. Bags keep the paper's parameters; logs get
@@ -23,6 +24,7 @@ from cogmap_core.datasets.topics import BagTopics
 from cogmap_core.datasets.tuc import looks_like_tuc, read_tuc
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.sources.log_text import BOM
 from cogmap_core.sources.odometry_log import (
     LOG_EVALUATION,
     LOG_MAP_PARAMS,
@@ -32,6 +34,8 @@ from cogmap_core.sources.odometry_log import (
 
 FORMATS = ("bag", "tuc", "csv")
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")
+SNIFF_LIMIT = 1 << 20
+"""Bytes :func:`detect_format` reads to find the first line that is not blank or a comment."""
 
 
 @dataclass(frozen=True)
@@ -128,28 +132,42 @@ def detect_format(path: str | Path) -> str:
         raise InputFileError(f"{path}: no such file; give a bag, a TUC log or a CSV log")
     try:
         with path.open("rb") as handle:
-            head = handle.read(4096)
+            head = handle.read(SNIFF_LIMIT)
     except OSError as exc:
         raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
     if head.startswith(b"#ROSBAG"):
         return "bag"
-    if not head.strip():
-        raise InputFileError(f"{path}: the file is empty; nothing to map")
+    whole = len(head) < SNIFF_LIMIT
+    first, comments = _first_data_line(head.removeprefix(BOM))
+    if first is None:
+        if not comments and whole:
+            raise InputFileError(f"{path}: the file is empty; nothing to map")
+        where = "the file holds" if whole else f"its first {SNIFF_LIMIT >> 20} MiB hold"
+        raise InputFileError(f"{path}: {where} only comments and blank lines; nothing to map")
     # the first data line decides (see looks_like_tuc)
-    lines = [
-        line.strip()
-        for line in head.decode("utf-8", errors="replace").splitlines()
-        if line.strip() and not line.strip().startswith("#")
-    ][:1]
-    if lines and looks_like_tuc(lines[0].split()[0]):
+    if looks_like_tuc(first.split()[0]):
         return "tuc"
-    if lines and looks_like_csv(lines[0]):
+    if looks_like_csv(first):
         return "csv"
-    first = lines[0][:60] if lines else ""
     raise InputFileError(
-        f"{path}: not a bag, a TUC log or a CSV log (first line {first!r}); "
+        f"{path}: not a bag, a TUC log or a CSV log (first line {first[:60]!r}); "
         f"give --format {{{','.join(FORMATS)}}} if it is one"
     )
+
+
+def _first_data_line(head: bytes) -> tuple[str | None, bool]:
+    """The first line of ``head`` that is not blank or a comment, and whether a comment came first.
+
+    The line is None when there is none.
+    """
+    comments = False
+    for raw in head.decode("utf-8", errors="replace").splitlines():
+        line = raw.strip()
+        if line.startswith("#"):
+            comments = True
+        elif line:
+            return line, comments
+    return None, comments
 
 
 def resolve_format(path: str | Path, fmt: str | None) -> str:

@@ -16,7 +16,10 @@ sample only starts the clock): the robot turns by ``omega * dt`` and goes ``v * 
 the map's :class:`~cogmap_core.events.Odometry` (rotate, then translate). Lateral velocity (the
 TUC files' ``vy``, a few mm/s) is not part of the map's motion model and is dropped; on Lecture
 Hall that changes the dead-reckoning ATE by 2 mm. An interval longer than ``max_odometry_gap``
-contributes no motion (counted as a warning).
+contributes no motion (counted as a warning). A line repeating an earlier line's time is dropped:
+with the same values it is a repeat, with other values it conflicts and the first one is kept
+(what the step making always did: it takes the first sample of a time) -- each kind counted, one
+warning line each. Odometry going back in time is an error: no rule tells which stretch is right.
 
 **Vertices** come from movement, as the experience map creates experiences: one at the first
 sample, then a new one whenever the robot has driven ``vertex_step`` metres or turned
@@ -33,6 +36,23 @@ position and ``relative_rad = 0`` in heading -- a camera only recognises a place
 about the same direction (on Lecture Hall the true matches' heading differs by a median of 2.4
 degrees, 90 % within 21 degrees). The heading is never judged: loop closures are scored by
 position only.
+
+What real place recognition writes is taken as it can be mapped; each kind is counted, with one
+warning line naming the first such line (``OdometryLog.read_counts``, :class:`LogStats`):
+
+- a candidate whose two times are less than :data:`SAME_VIEW` (1 s) apart matches the robot's
+  own view (a loop to itself): dropped;
+- one whose matched time is later than its time says the same the other way round ("the view at
+  ``time`` looks like the view at ``matched time``" is symmetric): the two are swapped, and the
+  link is made at the later time, when both places exist;
+- a time up to ``max_odometry_gap`` before the first or after the last odometry stamp (a query
+  logged just after the odometry stopped, a match to the first frames) is moved onto that stamp:
+  the odometry places the robot there as well as it bridges its own gaps; a candidate with a
+  time further out is dropped (:func:`loops_in_span`);
+- with no candidate left, or none in the file, the maps are the odometry's (a warning).
+
+A score outside [0, 1] or a value that is not a finite number is an error naming file and line:
+nothing says what such a candidate means.
 
 **No relocalisation.** RatSLAM reports a recognised place as link + set current vertex, and the
 robot then continues from the old vertex. With a camera front end that matches views to a few
@@ -64,7 +84,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.config import MapParams
-from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.errors import ParameterError
 from cogmap_core.evaluation import (
     EvaluationSettings,
     interpolate_poses,
@@ -72,8 +92,13 @@ from cogmap_core.evaluation import (
 )
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.frames import EventStep
+from cogmap_core.sources.log_text import LogFormatError, Rows
+
+__all__ = ["LogFormatError", "Rows"]  # re-exported: the readers' rows and error live in log_text
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 #: Map parameters for this kind of input, on top of the paper's (see :data:`LOG_MAP_PARAMS`).
 LOG_MAP_CHANGES: dict[str, float] = {
@@ -118,36 +143,8 @@ ODOMETRY_COLUMNS = ("time", "v", "omega")
 LOOP_COLUMNS = ("time", "matched time", "score")
 TRUTH_COLUMNS = ("time", "x", "y", "theta")
 
-
-class LogFormatError(InputFileError):
-    """A log file has a malformed line or values that break the log's rules (file:line named)."""
-
-
-def is_number(text: str) -> bool:
-    """Whether ``text`` reads as a float (the log readers' test of a field)."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def read_log_text(path: Path, expected: str) -> str:
-    """The text of a log file; ``expected`` says what its lines should be (for the messages).
-
-    Raises:
-        InputFileError: a missing or unreadable file.
-        LogFormatError: the file is not UTF-8 text.
-
-    """
-    if not path.is_file():
-        raise InputFileError(f"{path}: no such file")
-    try:
-        return path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise LogFormatError(f"{path}: not a text file; expected {expected}") from None
-    except OSError as exc:
-        raise InputFileError(f"{path}: cannot read it ({exc.strerror})") from None
+SAME_VIEW = 1.0
+"""A loop candidate whose two times are closer than this (s) matches the robot's own view."""
 
 
 @dataclass(frozen=True)
@@ -217,13 +214,21 @@ class OdometryLog:
     Attributes:
         path: the file the user gave (odometry, or the combined TUC input file).
         format: ``tuc`` or ``csv``.
-        odometry: ``(N, 3)`` time, forward velocity v (m/s), yaw rate omega (rad/s); N >= 1.
-        loops: ``(M, 3)`` time, matched time, score -- sorted by time.
+        odometry: ``(N, 3)`` time, forward velocity v (m/s), yaw rate omega (rad/s); N >= 1,
+            times increasing.
+        loops: ``(M, 3)`` time, matched time, score -- sorted by time, the matched time at
+            least :data:`SAME_VIEW` earlier; times may lie outside the odometry (see
+            :func:`log_steps`).
         ground_truth: ``(G, 4)`` time, x, y, theta covering the run, or None.
         ground_truth_path: where the ground truth came from.
         heading_known: whether the ground truth had a heading (else theta is the direction of
             travel, for display only).
         warnings: problems that did not stop the run (one line each).
+        loop_lines: the line of each loop candidate in ``loops_path`` (in the order of
+            ``loops``).
+        loops_path: the file the loop candidates came from (None: no loop file).
+        read_counts: lines the reader dropped or changed, by kind (``odometry_repeated``,
+            ``odometry_conflicting``, ``loops_same_view``, ``loops_swapped``).
 
     """
 
@@ -235,6 +240,9 @@ class OdometryLog:
     ground_truth_path: Path | None = None
     heading_known: bool = True
     warnings: tuple[str, ...] = ()
+    loop_lines: IntArray = field(default_factory=lambda: np.zeros(0, np.int64))
+    loops_path: Path | None = None
+    read_counts: dict[str, int] = field(default_factory=dict)
 
     @property
     def start(self) -> float:
@@ -270,33 +278,14 @@ def label_loop_candidates(log: OdometryLog, radius: float | None = None) -> NDAr
     return loop_candidate_distances(log.loops, truth[:, 0], truth[:, 1:3]) <= radius
 
 
-@dataclass
-class Rows:
-    """Parsed rows of one kind with where each came from (``file:line``), before validation."""
-
-    what: str
-    columns: tuple[str, ...]
-    values: list[Sequence[float]] = field(default_factory=list)
-    where: list[str] = field(default_factory=list)
-
-    def add(self, values: Sequence[float], where: str) -> None:
-        """Append one row."""
-        self.values.append(values)
-        self.where.append(where)
-
-    def array(self) -> FloatArray:
-        """The rows as an ``(n, len(columns))`` array."""
-        return np.asarray(self.values, dtype=np.float64).reshape(-1, len(self.columns))
-
-
 def check_finite(rows: Rows) -> FloatArray:
-    """The rows as an array; a value that is not finite is an error naming its file:line."""
-    data = rows.array()
+    """The rows' values; a value that is not finite is an error naming its file:line."""
+    data = rows.values
     bad = ~np.isfinite(data)
     if bad.any():
         row, col = (int(v) for v in np.argwhere(bad)[0])
         raise LogFormatError(
-            f"{rows.where[row]}: {rows.what} {rows.columns[col]} is {float(data[row, col])}; "
+            f"{rows.where(row)}: {rows.what} {rows.columns[col]} is {float(data[row, col])}; "
             "every value must be a finite number -- fix or drop the line"
         )
     return data
@@ -308,78 +297,171 @@ def check_increasing(rows: Rows, data: FloatArray, hint: str) -> None:
     if back.size:
         k = int(back[0]) + 1
         raise LogFormatError(
-            f"{rows.where[k]}: {rows.what} time {data[k, 0]:.6f} s is earlier than the previous "
+            f"{rows.where(k)}: {rows.what} time {data[k, 0]:.6f} s is earlier than the previous "
             f"({data[k - 1, 0]:.6f} s); {hint}"
         )
+
+
+def count_note(rows: Rows, mask: BoolArray, what: str) -> str:
+    """``"N x <what> (first at file:line)"`` for the rows in ``mask`` (at least one).
+
+    Without line numbers (a log made in code, not read), the note names no line.
+    """
+    count = int(np.count_nonzero(mask))
+    if rows.lines.shape[0] != mask.shape[0]:
+        return f"{count} x {what}"
+    first = int(np.flatnonzero(mask)[np.argmin(rows.lines[mask])])
+    return f"{count} x {what} (first at {rows.where(first)})"
 
 
 def make_odometry_log(
     path: Path,
     fmt: str,
     odometry: Rows,
-    loops: Rows,
+    loops: Rows | None,
     truth: Rows | None = None,
     truth_path: Path | None = None,
     warnings: Sequence[str] = (),
 ) -> OdometryLog:
-    """Validate parsed rows and build the log (the rules every format shares).
+    """Validate parsed rows and build the log (the rules every format shares; module doc).
+
+    Args:
+        path: the file the user gave.
+        fmt: ``tuc`` or ``csv``.
+        odometry: the odometry rows, in file order.
+        loops: the loop rows, in file order; None when there is no loop file (the reader
+            warned).
+        truth: the ground-truth rows, or None.
+        truth_path: the ground-truth file.
+        warnings: the reader's own warnings.
 
     Raises:
         LogFormatError: no odometry, a non-finite value, odometry or ground truth going back in
-            time, a loop outside the odometry's time span or matching a later or earlier-than-
-            the-data time, a score outside [0, 1], ground truth not overlapping the run.
+            time, a score outside [0, 1], ground truth not overlapping the run.
 
     """
     notes = list(warnings)
-    if not odometry.values:
+    if not len(odometry):
         raise LogFormatError(
             f"{path}: no odometry in the file; a log needs {odometry.what} lines "
             f"({', '.join(odometry.columns)})"
         )
-    odo = check_finite(odometry)
-    check_increasing(odometry, odo, "odometry must be in time order")
+    check_finite(odometry)
+    check_increasing(odometry, odometry.values, "odometry must be in time order")
+    odometry, counts = _repeated_stamps(odometry, notes)
+    odo = odometry.values
     t_first, t_last = float(odo[0, 0]), float(odo[-1, 0])
-    loop = check_finite(loops)
-    for k, (t, matched, score) in enumerate(loop.tolist()):
-        where = loops.where[k]
-        if not 0.0 <= score <= 1.0:
-            raise LogFormatError(
-                f"{where}: loop score {score!r} is outside [0, 1] (1 = most similar); "
-                "rescale the place recognition's scores"
-            )
-        if not t_first <= t <= t_last:
-            raise LogFormatError(
-                f"{where}: loop at {t:.6f} s is outside the odometry ({t_first:.6f}-"
-                f"{t_last:.6f} s); loops must happen while the robot is recorded"
-            )
-        if matched < t_first:
-            raise LogFormatError(
-                f"{where}: loop matches time {matched:.6f} s, before the data starts "
-                f"({t_first:.6f} s); the matched place must be one the log recorded"
-            )
-        if matched >= t:
-            raise LogFormatError(
-                f"{where}: loop at {t:.6f} s matches {matched:.6f} s, which is not earlier; "
-                "a loop closes on a place visited before"
-            )
-    loop = loop[np.argsort(loop[:, 0], kind="stable")] if loop.size else loop.reshape(0, 3)
+    loops_path = None if loops is None else loops.path
+    loops = loops if loops is not None else Rows.empty("loop", LOOP_COLUMNS, path)
+    loops, loop_counts = _loop_candidates(loops, notes)
+    counts.update(loop_counts)
     gt = None
     heading_known = True
     if truth is not None:
         gt, heading_known, note = _ground_truth(truth, truth_path or path, t_first, t_last)
         if note:
             notes.append(note)
-    return OdometryLog(path, fmt, odo, loop, gt, truth_path, heading_known, tuple(notes))
+    return OdometryLog(
+        path,
+        fmt,
+        odo,
+        loops.values,
+        gt,
+        truth_path,
+        heading_known,
+        tuple(notes),
+        loops.lines,
+        loops_path,
+        counts,
+    )
+
+
+def _repeated_stamps(odometry: Rows, notes: list[str]) -> tuple[Rows, dict[str, int]]:
+    """Odometry without the lines repeating an earlier line's time (the first one kept)."""
+    t = odometry.values[:, 0]
+    repeat = np.zeros(t.size, bool)
+    repeat[1:] = t[1:] == t[:-1]
+    counts = {"odometry_repeated": 0, "odometry_conflicting": 0}
+    if not repeat.any():
+        return odometry, counts
+    index = np.arange(t.size)
+    kept = np.maximum.accumulate(np.where(repeat, 0, index))  # the first line of its time
+    same = (odometry.values == odometry.values[kept]).all(axis=1)
+    identical, conflicting = repeat & same, repeat & ~same
+    if identical.any():
+        notes.append(
+            count_note(
+                odometry,
+                identical,
+                "odometry line with the time and values of an earlier line: dropped",
+            )
+        )
+    if conflicting.any():
+        notes.append(
+            count_note(
+                odometry,
+                conflicting,
+                "odometry line with the time of an earlier line but other values: dropped, "
+                "the earlier line kept",
+            )
+        )
+    counts["odometry_repeated"] = int(np.count_nonzero(identical))
+    counts["odometry_conflicting"] = int(np.count_nonzero(conflicting))
+    return odometry.take(~repeat), counts
+
+
+def _loop_candidates(loops: Rows, notes: list[str]) -> tuple[Rows, dict[str, int]]:
+    """Loop rows checked, without the ones matching their own view, later ones swapped, sorted."""
+    loop = check_finite(loops)
+    score = loop[:, 2]
+    bad = np.flatnonzero(~((score >= 0.0) & (score <= 1.0)))
+    if bad.size:
+        k = int(bad[0])
+        raise LogFormatError(
+            f"{loops.where(k)}: loop score {float(score[k])!r} is outside [0, 1] (1 = most "
+            "similar); rescale the place recognition's scores"
+        )
+    same = np.abs(loop[:, 0] - loop[:, 1]) < SAME_VIEW
+    if same.any():
+        notes.append(
+            count_note(
+                loops,
+                same,
+                f"loop candidate matching a view less than {SAME_VIEW:g} s from its own: dropped",
+            )
+        )
+        loops = loops.take(~same)
+        loop = loops.values
+    later = loop[:, 1] > loop[:, 0]
+    if later.any():
+        notes.append(
+            count_note(
+                loops,
+                later,
+                "loop candidate matching a later time: the two swapped (the later view matches "
+                "the earlier place)",
+            )
+        )
+        loop = loop.copy()
+        loop[later, :2] = loop[later, 1::-1]
+        loops = loops.with_values(loop)
+    counts = {
+        "loops_same_view": int(np.count_nonzero(same)),
+        "loops_swapped": int(np.count_nonzero(later)),
+    }
+    if (np.diff(loop[:, 0]) < 0).any():  # (no copy of a log that is in order)
+        loops = loops.take(np.argsort(loop[:, 0], kind="stable"))
+    return loops, counts
 
 
 def _ground_truth(
     truth: Rows, path: Path, t_first: float, t_last: float
 ) -> tuple[FloatArray | None, bool, str]:
     """Validated ground truth covering the run, or None with the reason (a warning)."""
-    if not truth.values:
+    if not len(truth):
         return None, True, f"{path}: no ground truth in the file; the report has no accuracy"
-    if len(truth.columns) == 4 and np.isnan(truth.array()[:, 3]).all():
-        truth = Rows(truth.what, truth.columns[:3], [v[:3] for v in truth.values], truth.where)
+    if len(truth.columns) == 4 and np.isnan(truth.values[:, 3]).all():
+        truth = truth.with_values(truth.values[:, :3], truth.columns[:3])
     data = check_finite(truth)
     check_increasing(truth, data, "ground truth must be in time order")
     heading_known = data.shape[1] == 4
@@ -426,23 +508,54 @@ class LogStats:
 
     Attributes:
         frames: steps produced.
-        loop_candidates: candidates in the file.
+        loop_candidates: candidates in the log (after the reader's drops, see
+            :attr:`OdometryLog.read_counts`).
+        loops_clamped: candidates with a time up to ``max_odometry_gap`` outside the odometry,
+            moved onto its first or last stamp.
+        loops_outside: candidates with a time further outside the odometry, ignored.
         below_threshold: ignored for a score below the threshold.
         too_close: ignored for less than ``min_loop_travel`` of odometry between the two times.
         duplicates: candidates of one query that landed on a vertex another candidate of it
             already linked, or on the vertex the robot is at.
         links: links emitted.
         odometry_gaps: odometry intervals longer than ``max_odometry_gap`` (no motion).
+        warnings: one line per kind of loop candidate or odometry interval not used as it was.
 
     """
 
     frames: int = 0
     loop_candidates: int = 0
+    loops_clamped: int = 0
+    loops_outside: int = 0
     below_threshold: int = 0
     too_close: int = 0
     duplicates: int = 0
     links: int = 0
     odometry_gaps: int = 0
+    warnings: list[str] = field(default_factory=list)
+
+
+def loops_in_span(log: OdometryLog, tolerance: float) -> tuple[FloatArray, BoolArray, BoolArray]:
+    """The loop candidates the odometry's time span can place (module doc, *Loop candidates*).
+
+    A time up to ``tolerance`` seconds before the first or after the last odometry stamp is
+    moved onto that stamp (the robot's pose there is known to the odometry's own tolerance for
+    gaps); a candidate with a time further out is dropped.
+
+    Returns:
+        The kept candidates (file times, moved ones moved), and per candidate of ``log.loops``
+        whether it was moved and whether it was dropped.
+
+    """
+    times = log.loops[:, :2]
+    t_first, t_last = log.start, float(log.odometry[-1, 0])
+    outside = ((times < t_first - tolerance) | (times > t_last + tolerance)).any(axis=1)
+    inside = np.clip(times, t_first, t_last)
+    moved = (inside != times).any(axis=1) & ~outside
+    kept = log.loops[~outside]
+    if moved.any():
+        kept[:, :2] = inside[~outside]
+    return kept, moved, outside
 
 
 def log_steps(
@@ -458,7 +571,7 @@ def log_steps(
     odo = log.odometry
     t0 = log.start
     t_odo = odo[:, 0] - t0
-    loops = log.loops.copy()
+    loops, moved, outside = loops_in_span(log, cfg.max_odometry_gap)
     loops[:, :2] -= t0
     times = np.union1d(t_odo, loops[:, 0]) if loops.size else t_odo.copy()
     # velocities of sample i hold over (t_{i-1}, t_i]
@@ -472,9 +585,12 @@ def log_steps(
     travelled = np.cumsum(np.abs(translation))
     stats = LogStats(
         frames=int(times.size),
-        loop_candidates=int(loops.shape[0]),
+        loop_candidates=int(log.loops.shape[0]),
+        loops_clamped=int(np.count_nonzero(moved)),
+        loops_outside=int(np.count_nonzero(outside)),
         odometry_gaps=int(np.count_nonzero(gap & (raw_dt > 0))),
     )
+    stats.warnings = _step_warnings(log, cfg, stats, moved, outside)
     truth = None
     if log.ground_truth is not None:
         gt = log.ground_truth
@@ -509,6 +625,34 @@ def log_steps(
         )
         steps.append(EventStep(k, t, tuple(events), pose, tuple(scores)))
     return steps, stats
+
+
+def _step_warnings(
+    log: OdometryLog, cfg: LogSourceConfig, stats: LogStats, moved: BoolArray, outside: BoolArray
+) -> list[str]:
+    """One line per kind of loop candidate or odometry interval :func:`log_steps` changed."""
+    out = []
+    span = f"({log.start:.3f}-{float(log.odometry[-1, 0]):.3f} s)"
+    gap = f"{cfg.max_odometry_gap:g} s"
+    path = log.loops_path or log.path
+    loops = Rows("loop", LOOP_COLUMNS, path, log.loops, log.loop_lines)
+    if stats.loops_clamped:
+        what = f"loop candidate with a time up to {gap} outside the odometry {span}: moved onto it"
+        out.append(count_note(loops, moved, what))
+    if stats.loops_outside:
+        what = f"loop candidate with a time more than {gap} outside the odometry {span}: dropped"
+        out.append(count_note(loops, outside, what))
+    if stats.odometry_gaps:
+        out.append(
+            f"{stats.odometry_gaps} x odometry gap longer than {gap} (no motion integrated over it)"
+        )
+    if log.loops_path is not None and stats.loop_candidates == stats.loops_outside:
+        dropped = stats.loops_outside or log.read_counts.get("loops_same_view", 0)
+        out.append(
+            f"{log.loops_path}: no loop candidates{' left' if dropped else ''}: the map is its "
+            "odometry"
+        )
+    return out
 
 
 def _queries(
@@ -602,12 +746,9 @@ class LogReader:
             loop_count=int(log.loops.shape[0]),
             has_ground_truth=log.ground_truth is not None,
         )
-        self.counters = LogCounters(frames=len(self.steps), warnings=list(log.warnings))
-        if self.stats.odometry_gaps:
-            self.counters.warnings.append(
-                f"{self.stats.odometry_gaps} x odometry gap longer than "
-                f"{self.config.max_odometry_gap:g} s (no motion integrated over it)"
-            )
+        self.counters = LogCounters(
+            frames=len(self.steps), warnings=[*log.warnings, *self.stats.warnings]
+        )
         self._times = [s.time for s in self.steps]
 
     @property
@@ -650,7 +791,10 @@ class LogReader:
             "ground_truth_heading": self.log.heading_known,
             "settings": self.config.to_dict(),
             "odometry_samples": self.info.odometry_count,
+            **self.log.read_counts,
             "loop_candidates": stats.loop_candidates,
+            "loops_clamped": stats.loops_clamped,
+            "loops_outside": stats.loops_outside,
             "below_threshold": stats.below_threshold,
             "too_close": stats.too_close,
             "duplicates": stats.duplicates,
