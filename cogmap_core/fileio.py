@@ -245,6 +245,48 @@ def interrupts_deferred() -> Iterator[None]:
             signal.raise_signal(received[0])
 
 
+#: The largest JSON file cogmap reads (parameter files, front-end profiles, report markers).
+MAX_JSON_BYTES = 16 * 1024 * 1024
+
+
+def loads_json(text: str | bytes) -> Any:
+    """``json.loads``, with a document nested deeper than Python's parser goes as a ValueError.
+
+    (The parser raises RecursionError on ``[[[...]]]`` nested some thousands deep.)
+    """
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("it is nested too deeply to read") from None
+
+
+def read_json(
+    path: Path, what: str, error: type[CogmapError], max_bytes: int = MAX_JSON_BYTES
+) -> Any:
+    """The JSON document in file ``path`` (at most ``max_bytes``), or ``error`` in one line.
+
+    ``what`` names the file in messages ("parameter file"). A file larger than ``max_bytes``
+    is refused without being read.
+    """
+    try:
+        with path.open("rb") as handle:
+            size = os.fstat(handle.fileno()).st_size
+            if size > max_bytes:
+                raise error(
+                    f"{path}: the {what} has {size} bytes, more than the "
+                    f"{max_bytes // (1024 * 1024)} MiB a {what} may have"
+                )
+            data = handle.read(max_bytes + 1)
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    if len(data) > max_bytes:  # (a file that grew while read)
+        raise error(f"{path}: the {what} has more than {max_bytes // (1024 * 1024)} MiB")
+    try:
+        return loads_json(data)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise error(f"{path}: not a readable JSON file ({' '.join(str(exc).split())})") from None
+
+
 def load_archive(
     path: Path,
     what: str,
@@ -285,7 +327,7 @@ def load_archive(
             f"{' '.join(str(exc).split())}); {advice}"
         ) from None
     try:
-        header = json.loads(str(arrays.pop("header")))
+        header = loads_json(str(arrays.pop("header")))
     except ValueError:  # (json.JSONDecodeError is one)
         raise error(f"{path}: the {what} file's header is not valid JSON; it is corrupt") from None
     found = header.get("format") if isinstance(header, dict) else None
