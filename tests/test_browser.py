@@ -200,7 +200,11 @@ def test_the_page_in_chromium(
     shots: list[Path] = []
     latencies: dict[str, float] = {}
     frames = reference.log.frames
-    with support.running_app(short_bag, autoplay=False) as app, sync_playwright() as p:
+    exports = tmp_path / "exports"
+    with (
+        support.running_app(short_bag, autoplay=False, export_dir=exports) as app,
+        sync_playwright() as p,
+    ):
         wait(app)
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         try:
@@ -336,25 +340,31 @@ def test_the_page_in_chromium(
             second.screenshot(path=str(ARTIFACTS / "browser-second-tab.png"))
             shots.append(ARTIFACTS / "browser-second-tab.png")
 
-            # ---- exports: summary.json to the browser, an HTML replay on the server
+            # ---- exports: summary.json to the browser, an HTML replay in the export folder
+            # on the server and to the browser (a name only: no server path can be typed)
             with page.expect_download(timeout=TIMEOUT_MS) as download:
                 page.get_by_role("button", name="download summary.json").click()
             summary = json.loads(Path(download.value.path()).read_text())
             assert summary["frames"] == app.replay.cursor
             assert summary["params"]["delta"] == 8.0
-            out = tmp_path / "replay.html"
-            replay_box = control(page, "replay file")
+            replay_box = control(page, "replay name")
             replay_box.click()
-            replay_box.fill(str(out))
+            replay_box.fill("../my replay.html")
             replay_box.press("Enter")
-            until(lambda: app.replay_path.value == str(out), WAIT_S, "the replay path")
-            page.get_by_role("button", name="save HTML replay").click()
+            until(lambda: app.replay_path.value == "../my replay.html", WAIT_S, "the name")
+            with page.expect_download(timeout=120_000) as download:
+                page.get_by_role("button", name="save HTML replay").click()
             export = page.locator("#cogmap-export")
             until(lambda: "saved the HTML replay" in export.inner_text(), 120, "the replay")
+            assert "as my_replay.html in the export folder" in export.inner_text()
+            out = exports / "my_replay.html"
+            assert sorted(p.name for p in exports.iterdir()) == ["my_replay.html"]
             umask = os.umask(0)
             os.umask(umask)
             assert out.stat().st_mode & 0o777 == 0o666 & ~umask
             assert "cogmap replay" in out.read_text()[:20000]
+            assert download.value.suggested_filename == "my_replay.html"
+            assert Path(download.value.path()).read_bytes() == out.read_bytes()
             page.screenshot(path=str(ARTIFACTS / "browser-final.png"))
             shots.append(ARTIFACTS / "browser-final.png")
         finally:
