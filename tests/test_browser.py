@@ -375,3 +375,59 @@ def test_the_page_in_chromium(
             print(f"  {label:>10}: {took * 1000:6.0f} ms")
         print(f"  median {statistics.median(latencies.values()) * 1000:.0f} ms")
         print("browser screenshots: " + ", ".join(str(s) for s in shots))
+
+
+def test_chromium_keeps_other_origins_out_and_the_token_holder_in(
+    short_bag: Path, tmp_path: Path
+) -> None:
+    """Issue 24: a page of another port opens no websocket; a tab with the token's URL works."""
+    _require_browser()
+    import functools
+    import http.server
+    import threading
+
+    import viser
+    from playwright.sync_api import sync_playwright
+
+    from app.server.access import AccessPolicy
+    from app.server.app import CogmapApp
+
+    token = "t" * 32
+    server = support.make_server(AccessPolicy(token=token))
+    app = CogmapApp(server, short_bag, autoplay=False, export_dir=tmp_path / "exports")
+    port = server.get_port()
+    (tmp_path / "evil.html").write_text(
+        "<script>window.result = 'pending';"
+        f"const ws = new WebSocket('ws://127.0.0.1:{port}/?token={token}', "
+        f"['viser-v{viser.__version__}']);"
+        "ws.onopen = () => { window.result = 'open'; };"
+        "ws.onerror = () => { window.result = 'refused'; };</script>"
+    )
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(tmp_path))
+    evil = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=evil.serve_forever, daemon=True).start()
+    try:
+        app.start()
+        wait(app)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            try:
+                page = browser.new_page()
+                for host in ("127.0.0.1", "localhost"):  # another port; another host name
+                    page.goto(f"http://{host}:{evil.server_port}/evil.html", timeout=TIMEOUT_MS)
+                    page.wait_for_function("window.result !== 'pending'", timeout=TIMEOUT_MS)
+                    assert page.evaluate("window.result") == "refused"
+                assert app.server.get_clients() == {}
+                page.goto(f"http://127.0.0.1:{port}/", timeout=TIMEOUT_MS)
+                assert "needs its token" in page.content()
+                page.goto(f"http://127.0.0.1:{port}/?token={token}", timeout=TIMEOUT_MS)
+                page.locator("#cogmap-status").wait_for(timeout=TIMEOUT_MS)
+                until(lambda: len(app.views) == 1, WAIT_S, "the tab's view")
+                page.get_by_role("button", name="play", exact=True).click()
+                until(lambda: app.replay.playing, WAIT_S, "play from the tab")
+            finally:
+                browser.close()
+    finally:
+        evil.shutdown()
+        app.stop()
+        server.stop()

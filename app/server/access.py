@@ -156,17 +156,18 @@ class AccessGate:
     # ------------------------------------------------------------------ the checks
     def refusal(self, headers: Any, path: str) -> str | None:
         """Why a request with these headers for ``path`` is refused (None: it is not)."""
-        host = headers.get("Host")
-        if not host:
-            return "a request without a Host header is refused"
+        hosts = _all(headers, "Host")
+        if len(hosts) != 1 or not hosts[0]:
+            return "a request needs exactly one Host header"
+        host = hosts[0]
         hostname = _hostname(host)
         if self.policy.loopback_only and not is_loopback(hostname):
             return (
                 "this server answers only requests addressed to this machine (localhost, "
                 "127.0.0.1, [::1])"
             )
-        origin = headers.get("Origin")
-        if origin is not None and not _same_origin(origin, host):
+        origins = _all(headers, "Origin")
+        if len(origins) > 1 or (origins and not _same_origin(origins[0], host)):
             return "a page of another origin may not connect to this server"
         token = self.policy.token
         if token is not None and not self._has_token(headers, path, token):
@@ -194,6 +195,10 @@ class AccessGate:
             )
 
 
+def _all(headers: Any, name: str) -> list[str]:
+    return list(headers.get_all(name)) if hasattr(headers, "get_all") else []
+
+
 def _hostname(host: str) -> str:
     """The name in a ``Host`` header (without its port; IPv6 without brackets)."""
     host = host.strip()
@@ -216,7 +221,7 @@ def _query_token(path: str) -> str | None:
 
 
 def _cookie(headers: Any, name: str) -> str | None:
-    for line in headers.get_all("Cookie") if hasattr(headers, "get_all") else []:
+    for line in _all(headers, "Cookie"):
         for part in line.split(";"):
             key, _, value = part.strip().partition("=")
             if key == name:

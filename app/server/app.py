@@ -420,8 +420,9 @@ class CogmapApp:
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
         with gui.add_folder("Open another bag — shared", expand_by_default=False):
+            names = self._list_bags()
             self.bag_dropdown = gui.add_dropdown(
-                "bag", (NO_BAG,), hint="the bags in the server's data folders"
+                "bag", names, initial_value=names[0], hint="the bags in the server's data folders"
             )
             self.refresh_button = gui.add_button("refresh the list", icon=viser.Icon.REFRESH)
             self.open_button = gui.add_button("open", icon=viser.Icon.FOLDER_OPEN)
@@ -429,7 +430,6 @@ class CogmapApp:
                 '<div class="cogmap-note" id="cogmap-open">A bag of the data folders; the '
                 "replay starts over with it, for everyone.</div>"
             )
-        self.refresh_bags()
         self.refresh_button.on_click(lambda _: self.refresh_bags())
         self.open_button.on_click(lambda _: self._open_chosen())
 
@@ -1250,8 +1250,8 @@ class CogmapApp:
                 )
 
             thread = threading.Thread(target=work, name="cogmap-html-replay", daemon=True)
-            self._saving = thread
             thread.start()
+            self._saving = thread
         return thread
 
     # ------------------------------------------------------------------ another bag
@@ -1259,11 +1259,14 @@ class CogmapApp:
         cls = "cogmap-note cogmap-error" if error else "cogmap-note"
         self.open_md.content = f'<div class="{cls}" id="cogmap-open">{html.escape(text_)}</div>'
 
+    def _list_bags(self) -> tuple[str, ...]:
+        """List the bags of the data folders; the dropdown's options (never empty)."""
+        self._bags = {f.name: f for f in self.data.listing()}
+        return tuple(self._bags) or (NO_BAG,)
+
     def refresh_bags(self) -> list[str]:
         """List the bags of the data folders in the dropdown again; returns their names."""
-        found = self.data.listing()
-        self._bags = {f.name: f for f in found}
-        names = tuple(self._bags) or (NO_BAG,)
+        names = self._list_bags()
         if tuple(self.bag_dropdown.options) != names:
             self.bag_dropdown.options = names
         if self.bag_dropdown.value not in names:
@@ -1281,8 +1284,8 @@ class CogmapApp:
             thread = threading.Thread(
                 target=self.open_bag, args=(name,), name="cogmap-open-bag", daemon=True
             )
-            self._opening = thread
             thread.start()
+            self._opening = thread
         return thread
 
     def open_bag(self, name: str) -> bool:
