@@ -130,8 +130,9 @@ def _serve(args: argparse.Namespace) -> int:
     export_dir, data_dirs = _folders(args)
     policy = policy_for(args.host, require_token=args.require_token, no_token=args.no_token)
     bag: BagSource = Path(args.bag) if args.bag is not None else default_dataset
-    # viser's banner goes to stderr (stdout is kept for our URL); every request passes the gate
-    server = guarded_server(args.host, args.port, policy, verbose=True)
+    # every request passes the gate; viser's banner is not printed (its URL has no token): the
+    # one URL to open is ours, on stdout
+    server = guarded_server(args.host, args.port, policy, verbose=False)
     port = server.get_port()
     if port != args.port:
         print(f"cogmap serve: port {args.port} is busy; using {port}", file=sys.stderr)
@@ -249,13 +250,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="a folder whose bags 'open another bag' lists (repeatable; default: the served "
         "input's folder); visitors choose from that list only",
     )
-    parser.add_argument(
+    token = parser.add_mutually_exclusive_group()
+    token.add_argument(
         "--no-token",
         action="store_true",
         help="do not ask for a token when listening beyond this machine (anyone who can reach "
         "the port controls the app; see docs/security.md)",
     )
-    parser.add_argument(
+    token.add_argument(
         "--require-token",
         action="store_true",
         help="ask for a token on loopback too (a machine shared with other users)",

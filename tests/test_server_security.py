@@ -496,3 +496,21 @@ def test_no_server_path_reaches_a_browser(short_bag: Path, tmp_path: Path) -> No
         assert "cogmap-replay-compact.html" in seen
         for secret in (str(ROOT), str(tmp_path), str(Path.home())):
             assert secret not in seen  # ...naming no server path (install, data, home)
+
+
+def test_the_token_and_what_loopback_is() -> None:
+    from app.server.access import is_loopback, new_token, policy_for
+    from cogmap_core.errors import CogmapError
+
+    assert all(is_loopback(h) for h in ("localhost", "127.0.0.1", "127.5.6.7", "::1", "[::1]"))
+    assert not any(is_loopback(h) for h in ("0.0.0.0", "::", "10.0.0.1", "example.org", ""))
+    made = {new_token({}) for _ in range(3)}
+    assert len(made) == 3 and all(len(t) == 32 for t in made)
+    assert new_token({"COGMAP_TOKEN": "a-fixed_token.of~20"}) == "a-fixed_token.of~20"
+    for bad in ("short", "sixteen chars!!!", "x" * 15):
+        with pytest.raises(CogmapError, match="COGMAP_TOKEN must be at least 16 characters"):
+            new_token({"COGMAP_TOKEN": bad})
+    assert policy_for("127.0.0.1").token is None and policy_for("127.0.0.1").loopback_only
+    assert policy_for("0.0.0.0").token is not None and not policy_for("0.0.0.0").loopback_only
+    assert policy_for("0.0.0.0", no_token=True).token is None
+    assert policy_for("localhost", require_token=True).token is not None

@@ -54,7 +54,7 @@ MAX_BAG_BYTES = 256 * 1024**3
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 #: An absolute path left in a message after the known folders were named (``/a/b``).
-_ABSOLUTE = re.compile(r"(?<![\w.~-])/(?:[^\s/:;,'\"()\[\]<>]+/)*[^\s/:;,'\"()\[\]<>]*")
+_ABSOLUTE = re.compile(r"(?<![\w.~-])/(?:[^\s/:;,'\"()\[\]<>]+/)*[^\s/:;,'\"()\[\]<>]+")
 
 
 def default_export_dir() -> Path:
