@@ -35,11 +35,12 @@ import hmac
 import http
 import io
 import ipaddress
+import os
 import secrets
 import sys
 import threading
 import urllib.parse
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -74,7 +75,7 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-def new_token(environ: dict[str, str] | None = None) -> str:
+def new_token(environ: Mapping[str, str] | None = None) -> str:
     """The token: ``$COGMAP_TOKEN`` when set (checked), else a new random one (32 characters).
 
     Raises:
@@ -82,7 +83,7 @@ def new_token(environ: dict[str, str] | None = None) -> str:
             characters a URL would have to escape.
 
     """
-    fixed = (environ if environ is not None else _environ()).get(TOKEN_ENV)
+    fixed = (environ if environ is not None else os.environ).get(TOKEN_ENV)
     if fixed is None or fixed == "":
         return secrets.token_urlsafe(24)
     if len(fixed) < MIN_TOKEN_LENGTH or urllib.parse.quote(fixed, safe="-_.~") != fixed:
@@ -91,12 +92,6 @@ def new_token(environ: dict[str, str] | None = None) -> str:
             "'-', '_', '.', '~'; unset it to have a random token made"
         )
     return fixed
-
-
-def _environ() -> dict[str, str]:
-    import os
-
-    return dict(os.environ)
 
 
 @dataclass
