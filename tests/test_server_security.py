@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import http.client
+import json
 import os
 import signal
 import socket
@@ -481,6 +482,11 @@ def test_a_visitor_cannot_tell_what_exists_outside_the_data_folders(
             assert not ok
             answers[name] = message.replace(repr(name).replace("'", "&#x27;"), "NAME")
         assert len(set(answers.values())) == 1, answers  # the same line, whatever exists
+        # summary.json names the bag, not its server path (here outside the data folders)
+        sent: list[tuple[str, bytes]] = []
+        visitor = types.SimpleNamespace(send_file_download=lambda n, c, **_: sent.append((n, c)))
+        app._download(visitor, "summary")  # type: ignore[arg-type]
+        assert json.loads(sent[0][1])["dataset"] == short_bag.name == "figure_eight_1lap.bag"
 
 
 def test_no_server_path_reaches_a_browser(short_bag: Path, tmp_path: Path) -> None:

@@ -1188,7 +1188,7 @@ class CogmapApp:
                 else:
                     name, content = "sizes.csv", sizes_csv_bytes(self.replay)
             if inputs is not None:  # (the bag named as the page names it, not by its server path)
-                inputs = dataclasses.replace(inputs, dataset=self.scrubber.scrub(inputs.dataset))
+                inputs = dataclasses.replace(inputs, dataset=self.data.shown(inputs.dataset))
                 name, content = "summary.json", summary_bytes(inputs)
         except Exception as exc:
             traceback.print_exc()

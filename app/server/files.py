@@ -214,6 +214,15 @@ class DataFolders:
             )
         return DataFile(chosen.name, real, chosen.folder)
 
+    def shown(self, path: str | Path) -> str:
+        """How the page names the file ``path``: relative to its data folder, else its name."""
+        real = Path(os.path.realpath(path)) if str(path) else Path()
+        for label, _, folder in self.folders:
+            if _inside(real, folder) and real != folder:
+                relative = real.relative_to(folder).as_posix()
+                return f"{label}/{relative}" if label else relative
+        return Path(path).name
+
     def scrubber(self, export: ExportFolder | None = None) -> Scrubber:
         """What rewrites messages for the page (data folders and the export folder named)."""
         known: list[tuple[str, str]] = []
