@@ -132,7 +132,7 @@ def _serve(args: argparse.Namespace) -> int:
     bag: BagSource = Path(args.bag) if args.bag is not None else default_dataset
     # every request passes the gate; viser's banner is not printed (its URL has no token): the
     # one URL to open is ours, on stdout
-    server = guarded_server(args.host, args.port, policy, verbose=False)
+    server = guarded_server(args.host, args.port, policy, verbose=False, quiet=True)
     port = server.get_port()
     if port != args.port:
         print(f"cogmap serve: port {args.port} is busy; using {port}", file=sys.stderr)
