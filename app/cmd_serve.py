@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import signal
 import sys
@@ -23,7 +22,10 @@ from app.cli_common import (
     map_changes_from_args,
     topics_from_args,
 )
+from app.server.access import page_url
+from app.server.files import default_export_dir
 from app.server.replay import BagSource, GenerationProgress
+from cogmap_core.datasets.cache import cache_dir
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.session_file import describe, resume_session
 from cogmap_core.sources.detect import KINDS, check_companions, check_sessions_allowed
@@ -55,13 +57,39 @@ def _speed(text: str) -> float:
     return value
 
 
-def display_url(host: str, port: int) -> str:
-    """The URL to open for a server bound to ``host``:``port``."""
-    if host in ("0.0.0.0", "::", ""):
-        host = "localhost"
-    if ":" in host:
-        host = f"[{host}]"
-    return f"http://{host}:{port}"
+def display_url(host: str, port: int, token: str | None = None) -> str:
+    """The URL to open for a server bound to ``host``:``port`` (see :func:`page_url`)."""
+    return page_url(host, port, token)
+
+
+def _folders(args: argparse.Namespace) -> tuple[Path, list[Path]]:
+    """The export folder and the data folders (checked: one line when one is not a folder)."""
+    export = Path(args.export_dir).expanduser() if args.export_dir else default_export_dir()
+    if export.exists() and not export.is_dir():
+        raise ParameterError(f"--export-dir {export} is not a folder; give a folder")
+    data: list[Path] = []
+    for given in args.data_dir or []:
+        folder = Path(given).expanduser()
+        if not folder.is_dir():
+            raise ParameterError(f"--data-dir {folder} is not a folder; give a folder of bags")
+        data.append(folder)
+    if not data:  # the served input's folder (the cache's for the built-in dataset)
+        data = [Path(args.bag).parent if args.bag is not None else cache_dir()]
+    return export, data
+
+
+def _network_warning(host: str, port: int, token: str | None) -> str:
+    who = (
+        "anyone who has the URL below"
+        if token is not None
+        else "anyone (--no-token: no token is asked)"
+    )
+    where = "every network interface" if host in ("0.0.0.0", "::", "") else host
+    return (
+        f"cogmap serve: warning: listening on {where}, port {port}: {who} and can reach this "
+        "machine can watch and steer the replay, open the bags of the data folders and save "
+        "replays in the export folder; see docs/security.md"
+    )
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -96,17 +124,21 @@ def _serve(args: argparse.Namespace) -> int:
             )
         resume = resume_session(args.resume, frontend_from_args(args, bag_path), 4, changes)
         print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
-    import viser
-
+    from app.server.access import guarded_server, is_loopback, policy_for
     from app.server.app import CogmapApp
 
+    export_dir, data_dirs = _folders(args)
+    policy = policy_for(args.host, require_token=args.require_token, no_token=args.no_token)
     bag: BagSource = Path(args.bag) if args.bag is not None else default_dataset
-    with contextlib.redirect_stdout(sys.stderr):  # viser's banner: keep stdout for our URL
-        server = viser.ViserServer(host=args.host, port=args.port, label="cogmap")
+    # every request passes the gate; viser's banner is not printed (its URL has no token): the
+    # one URL to open is ours, on stdout
+    server = guarded_server(args.host, args.port, policy, verbose=False, quiet=True)
     port = server.get_port()
     if port != args.port:
         print(f"cogmap serve: port {args.port} is busy; using {port}", file=sys.stderr)
-    url = display_url(args.host, port)
+    if not is_loopback(args.host):
+        print(_network_warning(args.host, port, policy.token), file=sys.stderr)
+    url = display_url(args.host, port, policy.token)
     app = CogmapApp(
         server,
         bag,
@@ -122,6 +154,13 @@ def _serve(args: argparse.Namespace) -> int:
         log=log,
         defaults=kind.map_params,
         resume=resume,
+        export_dir=export_dir,
+        data_dirs=data_dirs,
+    )
+    folders = ", ".join(str(d) for d in data_dirs)
+    print(
+        f"cogmap serve: replays are saved in {export_dir}; bags are listed from {folders}",
+        file=sys.stderr,
     )
     stop = threading.Event()
 
@@ -194,7 +233,34 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "--static",
         default=None,
         metavar="DIR",
-        help="folder of web-facing assets; HTML replays go to DIR/replays (default: static/)",
+        help="folder of web-facing assets (default: static/)",
+    )
+    parser.add_argument(
+        "--export-dir",
+        default=None,
+        metavar="DIR",
+        help="the one folder the page saves HTML replays into (default: $COGMAP_CACHE/exports, "
+        "i.e. ~/.cache/cogmap/exports); visitors choose only a file name",
+    )
+    parser.add_argument(
+        "--data-dir",
+        action="append",
+        default=None,
+        metavar="DIR",
+        help="a folder whose bags 'open another bag' lists (repeatable; default: the served "
+        "input's folder); visitors choose from that list only",
+    )
+    token = parser.add_mutually_exclusive_group()
+    token.add_argument(
+        "--no-token",
+        action="store_true",
+        help="do not ask for a token when listening beyond this machine (anyone who can reach "
+        "the port controls the app; see docs/security.md)",
+    )
+    token.add_argument(
+        "--require-token",
+        action="store_true",
+        help="ask for a token on loopback too (a machine shared with other users)",
     )
     add_input_arguments(parser)
     add_map_arguments(parser)

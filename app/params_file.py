@@ -11,17 +11,19 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 from cogmap_core.config import MapParams
 from cogmap_core.errors import CogmapError, InputFileError
+from cogmap_core.fileio import read_json
 
 BEST_FORMAT = "cogmap-sweep-best"
 DEFAULT_ENTRY = "smallest_complete"
 SINGLE_ENTRIES = ("smallest_complete", "paper")
 LIST_ENTRIES = ("front_ate", "front_completeness", "beat_paper")
+_JSON_TYPES = {"list": "list", "str": "string", "int": "number", "float": "number",
+               "bool": "boolean", "dict": "object", "null": "null"}  # fmt: skip
 
 
 def split_entry(text: str) -> tuple[Path, str | None]:
@@ -41,10 +43,7 @@ def load_params_changes(text: str) -> dict[str, float]:
     path, entry = split_entry(text)
     if not path.is_file():
         raise InputFileError(f"{path}: no such parameter file; give a JSON file, e.g. best.json")
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise InputFileError(f"{path}: not a readable JSON file ({exc})") from None
+    data = read_json(path, "parameter file", InputFileError)
     if not isinstance(data, dict):
         raise InputFileError(f"{path}: expected a JSON object of map parameters")
     if data.get("format") == BEST_FORMAT:
@@ -57,10 +56,21 @@ def load_params_changes(text: str) -> dict[str, float]:
     if not isinstance(values, dict):
         raise InputFileError(f"{path}: 'params' must be an object of parameter: value")
     try:
-        MapParams.from_dict(values)  # unknown names and out-of-range values
+        MapParams.from_dict(values)  # unknown names, values that are not numbers or out of range
     except (CogmapError, TypeError) as exc:  # TypeError: a value of the wrong type
         raise InputFileError(f"{path}: {exc}") from None
     return dict(values)
+
+
+def _entry_object(path: Path, entry: str, chosen: object) -> dict[str, Any]:
+    """A best.json entry, which must be a JSON object (a setting), as a dict."""
+    if not isinstance(chosen, dict):
+        kind = type(chosen).__name__ if chosen is not None else "null"
+        raise InputFileError(
+            f"{path}#{entry}: the entry is a {_JSON_TYPES.get(kind, kind)}, not a setting "
+            "(an object of parameters); the file is not a sweep's best.json as cogmap writes it"
+        )
+    return dict(chosen)
 
 
 def _best_entry(path: Path, best: dict[str, Any], entry: str) -> dict[str, Any]:
@@ -68,13 +78,18 @@ def _best_entry(path: Path, best: dict[str, Any], entry: str) -> dict[str, Any]:
     choices = ", ".join(SINGLE_ENTRIES + tuple(f"{n}/K" for n in LIST_ENTRIES))
     if name in SINGLE_ENTRIES and not index_text:
         chosen = best.get(name)
-        if not chosen:
+        if chosen is None or chosen == {}:
             raise InputFileError(
                 f"{path}: the sweep has no {name} setting; pick another entry ({choices})"
             )
-        return dict(chosen)
+        return _entry_object(path, entry, chosen)
     if name in LIST_ENTRIES:
         items = best.get(name) or []
+        if not isinstance(items, list):
+            raise InputFileError(
+                f"{path}#{entry}: {name} is a {_JSON_TYPES.get(type(items).__name__, 'value')}, "
+                "not a list of settings; the file is not a sweep's best.json as cogmap writes it"
+            )
         try:
             index = int(index_text or "0")
         except ValueError:
@@ -83,5 +98,5 @@ def _best_entry(path: Path, best: dict[str, Any], entry: str) -> dict[str, Any]:
             raise InputFileError(
                 f"{path}#{entry}: {name} has {len(items)} settings (0..{len(items) - 1})"
             )
-        return dict(items[index])
+        return _entry_object(path, entry, items[index])
     raise InputFileError(f"{path}: no entry {entry!r}; entries: {choices}")

@@ -321,6 +321,15 @@ def read_warnings(reader: Source) -> dict[str, Any]:
     return {k: v for k, v in asdict(reader.counters).items() if k != "frames" and v}
 
 
+def _figure(value: float | None) -> str:
+    """A figure of the report to three decimals, ``-`` where there is none.
+
+    A map of one vertex has no ATE (nothing to align), one that covers none of the true path no
+    correctness: a map too small to measure is still reported.
+    """
+    return "-" if value is None else f"{value:.3f}"
+
+
 def _rounded(value: float) -> float | None:
     return None if math.isnan(value) else round(value, 6)
 
@@ -631,10 +640,10 @@ class HeadlessPipeline:
                     aligned[mode.value] = poses
         notes = {}
         for name, entry in summary["maps"].items():
-            if entry.get("completeness") is not None:
+            if entry.get("completeness") is not None:  # (a figure may be None: "-")
                 notes[name] = (
-                    f"ATE {entry['ate_m']:.3f} m, completeness {entry['completeness']:.3f}, "
-                    f"correctness {entry['correctness']:.3f}"
+                    f"ATE {_figure(entry['ate_m'])} m, completeness "
+                    f"{_figure(entry['completeness'])}, correctness {_figure(entry['correctness'])}"
                 )
         save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
 

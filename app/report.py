@@ -34,6 +34,7 @@ from cogmap_core.fileio import (
     check_writable,
     describe_os_error,
     interrupts_deferred,
+    loads_json,
     output_error,
     partial_name,
     remove_stale,
@@ -47,7 +48,7 @@ _STAGING_NAME = "cogmap-report"
 def read_marker(folder: Path) -> list[str] | None:
     """The file names listed by the report marker in ``folder``; None without a valid marker."""
     try:
-        data = json.loads((folder / MARKER).read_text(encoding="utf-8"))
+        data = loads_json((folder / MARKER).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
     files = data.get("files") if isinstance(data, dict) else None

@@ -137,11 +137,38 @@ def parameter_range(name: str) -> tuple[float, bool, float]:
 def validate_parameter(name: str, value: float) -> None:
     """Raise :class:`ParameterError` (naming the valid range) if ``value`` is out of range."""
     low, inclusive, high, meaning = _RANGES[name]
-    ok = isinstance(value, int | float) and math.isfinite(value)
+    ok = is_finite_number(value)
     if ok:
         ok = (value >= low if inclusive else value > low) and value <= high
     if not ok:
         bracket = "[" if inclusive else "("
-        raise ParameterError(
-            f"{name}={value!r} is out of range: {meaning} must be in {bracket}{low:g}, {high:g}]"
+        wrong = (
+            "is not a number"
+            if not isinstance(value, int | float) or isinstance(value, bool)
+            else "is out of range"
         )
+        raise ParameterError(
+            f"{name}={short_repr(value)} {wrong}: {meaning} must be in {bracket}{low:g}, {high:g}]"
+        )
+
+
+def is_finite_number(value: object) -> bool:
+    """Whether ``value`` is an int or float (not a bool) that is finite as a float.
+
+    ``true`` in a JSON file is not 1, and an integer too large for a float (400 digits) is not
+    a number either (``math.isfinite`` would raise OverflowError on it).
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+def short_repr(value: object, limit: int = 40) -> str:
+    """``repr(value)``, cut to about ``limit`` characters (a 400-digit integer stays one line)."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[: limit - 10]}… ({len(text)} characters)"

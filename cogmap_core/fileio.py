@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import json
+import math
 import os
 import re
 import secrets
@@ -26,7 +27,8 @@ import shutil
 import signal
 import threading
 import zipfile
-from collections.abc import Iterator, Sequence
+import zlib
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -245,6 +247,122 @@ def interrupts_deferred() -> Iterator[None]:
             signal.raise_signal(received[0])
 
 
+#: The largest JSON file cogmap reads (parameter files, front-end profiles, report markers).
+MAX_JSON_BYTES = 16 * 1024 * 1024
+
+
+def loads_json(text: str | bytes) -> Any:
+    """``json.loads``, with a document nested deeper than Python's parser goes as a ValueError.
+
+    (The parser raises RecursionError on ``[[[...]]]`` nested some thousands deep.)
+    """
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("it is nested too deeply to read") from None
+
+
+def read_json(
+    path: Path, what: str, error: type[CogmapError], max_bytes: int = MAX_JSON_BYTES
+) -> Any:
+    """The JSON document in file ``path`` (at most ``max_bytes``), or ``error`` in one line.
+
+    ``what`` names the file in messages ("parameter file"). A file larger than ``max_bytes``
+    is refused without being read.
+    """
+    try:
+        with path.open("rb") as handle:
+            size = os.fstat(handle.fileno()).st_size
+            if size > max_bytes:
+                raise error(
+                    f"{path}: the {what} has {size} bytes, more than the "
+                    f"{max_bytes // (1024 * 1024)} MiB a {what} may have"
+                )
+            data = handle.read(max_bytes + 1)
+    except OSError as exc:
+        raise error(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    if len(data) > max_bytes:  # (a file that grew while read)
+        raise error(f"{path}: the {what} has more than {max_bytes // (1024 * 1024)} MiB")
+    try:
+        return loads_json(data)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise error(f"{path}: not a readable JSON file ({' '.join(str(exc).split())})") from None
+
+
+#: The most one of cogmap's archives (a session or event file) may hold, uncompressed (bytes).
+#: The session of a 60-lap run (2 h 25 min of data) holds about 25 MB; a file declaring more is
+#: refused before any of it is read.
+MAX_ARCHIVE_BYTES = 512 * 1024 * 1024
+#: The most an archive's JSON header may hold (bytes): a session's is some 60 kB.
+MAX_HEADER_BYTES = 32 * 1024 * 1024
+#: The most arrays an archive may hold (a session has some 170).
+MAX_ARCHIVE_MEMBERS = 4096
+
+HeaderCheck = Callable[[dict[str, Any]], None]
+
+
+def _megabytes(count: int) -> str:
+    return f"{count / 1e6:,.1f} MB"
+
+
+def _check_members(
+    path: Path, archive: zipfile.ZipFile, what: str, error: type[CogmapError]
+) -> dict[str, zipfile.ZipInfo]:
+    """The archive's arrays by name, once their declared sizes are known to fit the caps.
+
+    Each member's uncompressed size (the zip directory's ``file_size``, which bounds what reading
+    it can yield) and the size its ``.npy`` header declares (``shape`` x ``itemsize``, which
+    NumPy allocates before it reads) are checked against :data:`MAX_ARCHIVE_BYTES` (the header:
+    :data:`MAX_HEADER_BYTES`) before anything is decompressed beyond those headers.
+    """
+    infos = archive.infolist()
+    if len(infos) > MAX_ARCHIVE_MEMBERS:
+        raise error(
+            f"{path}: the {what} file has {len(infos)} members, more than the "
+            f"{MAX_ARCHIVE_MEMBERS} a cogmap {what} file may have; it is not one cogmap wrote"
+        )
+    members: dict[str, zipfile.ZipInfo] = {}
+    total = 0
+    for info in infos:
+        name = info.filename
+        if not name.endswith(".npy") or info.is_dir():
+            raise error(f"{path}: not a cogmap {what} file (member {name!r} is not an array)")
+        key = name[: -len(".npy")]
+        cap = MAX_HEADER_BYTES if key == "header" else MAX_ARCHIVE_BYTES
+        total += info.file_size
+        if info.file_size > cap or total > MAX_ARCHIVE_BYTES:
+            held = "holds" if info.file_size > cap else "brings the file to"
+            size = info.file_size if info.file_size > cap else total
+            limit = cap if info.file_size > cap else MAX_ARCHIVE_BYTES
+            raise error(
+                f"{path}: array {key} {held} {_megabytes(size)} uncompressed, more than the "
+                f"{limit // (1024 * 1024)} MiB a cogmap {what} file may hold; refused unread"
+            )
+        with archive.open(info) as handle:
+            version = np.lib.format.read_magic(handle)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(handle)
+            elif version == (2, 0):
+                shape, _, dtype = np.lib.format.read_array_header_2_0(handle)
+            else:
+                raise ValueError(f"array {key} has .npy format version {version}")
+        if dtype.hasobject:
+            raise ValueError(f"array {key} holds Python objects")
+        declared = math.prod(int(n) for n in shape) * dtype.itemsize
+        if declared > info.file_size:
+            raise error(
+                f"{path}: array {key} declares {_megabytes(declared)} but holds "
+                f"{_megabytes(info.file_size)}; the file is corrupt"
+            )
+        members[key] = info
+    return members
+
+
+def _read_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> NDArray[Any]:
+    with archive.open(info) as handle:
+        return np.lib.format.read_array(handle, allow_pickle=False)
+
+
 def load_archive(
     path: Path,
     what: str,
@@ -254,6 +372,7 @@ def load_archive(
     required: Sequence[str] = (),
     advice: str = "",
     version_advice: str = "",
+    check_header: HeaderCheck | None = None,
 ) -> tuple[dict[str, Any], dict[str, NDArray[Any]]]:
     """Read one of cogmap's ``.npz`` archives: its JSON header and its arrays.
 
@@ -261,32 +380,57 @@ def load_archive(
     the data arrays. ``what`` names the kind in messages ("event" for "no such event file");
     ``advice`` ends the message of an unreadable file, ``version_advice`` that of another version.
 
+    Nothing large is allocated before it is known to fit: the sizes every member declares are
+    checked first (:data:`MAX_ARCHIVE_BYTES`, :data:`MAX_HEADER_BYTES`), then the header is
+    read and checked (format, version, and ``check_header``, which may refuse the file by
+    raising before any array is read), then the arrays.
+
     Returns:
         The header and the arrays (without the header), all read into memory.
 
     Raises:
         error: a missing, truncated or corrupt file, a required array missing, a header that is
-            not a JSON object of this format, or another version (one line naming the problem).
+            not a JSON object of this format, or another version, a file larger than the caps
+            (one line naming the problem); whatever ``check_header`` raises.
 
     """
     if not path.is_file():
         raise error(f"{path}: no such {what} file")
     try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [name for name in ("header", *required) if name not in data.files]
+        with path.open("rb") as handle, zipfile.ZipFile(handle) as archive:
+            members = _check_members(path, archive, what, error)
+            missing = [name for name in ("header", *required) if name not in members]
             if missing:
                 raise error(f"{path}: not a cogmap {what} file (missing {', '.join(missing)})")
-            arrays = {name: data[name] for name in data.files}
-    except error:
+            text = str(_read_member(archive, members.pop("header")))
+            header = _parse_header(path, text, what, format_name, version, error, version_advice)
+            if check_header is not None:
+                check_header(header)
+            arrays = {name: _read_member(archive, info) for name, info in members.items()}
+    except CogmapError:
         raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as exc:
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, zlib.error) as exc:
         raise error(
             f"{path}: not a readable cogmap {what} file ({type(exc).__name__}: "
             f"{' '.join(str(exc).split())}); {advice}"
         ) from None
+    except MemoryError:
+        raise error(f"{path}: the {what} file does not fit in memory") from None
+    return header, arrays
+
+
+def _parse_header(
+    path: Path,
+    text: str,
+    what: str,
+    format_name: str,
+    version: int,
+    error: type[CogmapError],
+    version_advice: str,
+) -> dict[str, Any]:
     try:
-        header = json.loads(str(arrays.pop("header")))
-    except ValueError:  # (json.JSONDecodeError is one)
+        header = loads_json(text)
+    except ValueError:  # (json.JSONDecodeError is one; so is a header nested too deep)
         raise error(f"{path}: the {what} file's header is not valid JSON; it is corrupt") from None
     found = header.get("format") if isinstance(header, dict) else None
     if found != format_name:
@@ -296,4 +440,4 @@ def load_archive(
             f"{path}: {what} format version {header.get('version')!r} is not supported "
             f"(this cogmap reads version {version}); {version_advice}"
         )
-    return header, arrays
+    return header

@@ -312,15 +312,39 @@ def _check_json(check: RelocalisationCheck) -> Json:
 
 
 # ============================================================================ reading
-def load_session(path: Path | str) -> tuple[SlamSession, SessionMeta]:
+def load_session(
+    path: Path | str,
+    frontend: FrontEndConfig | None = None,
+    image_scale: int | None = None,
+) -> tuple[SlamSession, SessionMeta]:
     """Read a session written by :func:`save_session`.
 
+    With ``frontend`` (and ``image_scale``), a session made with other front-end settings (or
+    decoded at another scale) is refused from its header alone, before any array is read and
+    before its front end is built: a header's settings may ask for a pose cell network of many
+    gigabytes.
+
     Raises:
-        SessionError: missing, truncated or corrupt file, another format or version, or
-            contents that do not fit together (one line naming the problem).
+        SessionError: missing, truncated or corrupt file, another format or version, contents
+            that do not fit together, other front-end settings than ``frontend`` (one line
+            naming the problem).
 
     """
     path = Path(path)
+
+    def check_header(header: dict[str, Any]) -> None:
+        if frontend is None and image_scale is None:
+            return
+        try:
+            saved = FrontEndConfig.from_dict(header["frontend"])
+            scale = int(header["image_scale"])
+        except (KeyError, TypeError, ValueError, OverflowError, ParameterError) as exc:
+            raise SessionError(
+                f"{path}: the session's front-end settings cannot be read ({type(exc).__name__}: "
+                f"{' '.join(str(exc).split())[:200]}); the file is corrupt"
+            ) from None
+        _refuse_other_settings(path, saved, scale, frontend, image_scale)
+
     header, arrays = load_archive(
         path,
         "session",
@@ -329,6 +353,7 @@ def load_session(path: Path | str) -> tuple[SlamSession, SessionMeta]:
         SessionError,
         advice="it is truncated or corrupt, use an intact copy",
         version_advice="resume it with the cogmap that wrote it or start a new session",
+        check_header=check_header,
     )
     listed = header.get("arrays")
     if not isinstance(listed, dict) or set(listed) != set(arrays):
@@ -606,15 +631,26 @@ def check_resumable(
     path: Path | str, session: SlamSession, meta: SessionMeta, frontend: FrontEndConfig, scale: int
 ) -> None:
     """Refuse (one line) a session whose front end cannot continue on these settings."""
-    mismatch = frontend_mismatch(session.frontend.config, frontend)
-    if mismatch is not None:
+    _refuse_other_settings(path, session.frontend.config, meta.image_scale, frontend, scale)
+
+
+def _refuse_other_settings(
+    path: Path | str,
+    saved: FrontEndConfig,
+    saved_scale: int,
+    frontend: FrontEndConfig | None,
+    scale: int | None,
+) -> None:
+    if frontend is not None:
+        mismatch = frontend_mismatch(saved, frontend)
+        if mismatch is not None:
+            raise SessionError(
+                f"{path}: the session was made with other front-end settings: {mismatch}; resume "
+                "with the same settings (the bag's profile and --frontend) or start a new session"
+            )
+    if scale is not None and saved_scale != scale:
         raise SessionError(
-            f"{path}: the session was made with other front-end settings: {mismatch}; resume "
-            "with the same settings (the bag's profile and --frontend) or start a new session"
-        )
-    if meta.image_scale != scale:
-        raise SessionError(
-            f"{path}: the session's frames were decoded at 1/{meta.image_scale} scale, this run "
+            f"{path}: the session's frames were decoded at 1/{saved_scale} scale, this run "
             f"decodes at 1/{scale}; resume with the same scale or start a new session"
         )
 
@@ -634,7 +670,7 @@ def resume_session(
             saved after its final optimisation.
 
     """
-    session, meta = load_session(path)
+    session, meta = load_session(path, frontend, image_scale)  # settings checked before building
     check_resumable(path, session, meta, frontend, image_scale)
     if session.finished:
         raise SessionError(

@@ -200,7 +200,11 @@ def test_the_page_in_chromium(
     shots: list[Path] = []
     latencies: dict[str, float] = {}
     frames = reference.log.frames
-    with support.running_app(short_bag, autoplay=False) as app, sync_playwright() as p:
+    exports = tmp_path / "exports"
+    with (
+        support.running_app(short_bag, autoplay=False, export_dir=exports) as app,
+        sync_playwright() as p,
+    ):
         wait(app)
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
         try:
@@ -336,25 +340,31 @@ def test_the_page_in_chromium(
             second.screenshot(path=str(ARTIFACTS / "browser-second-tab.png"))
             shots.append(ARTIFACTS / "browser-second-tab.png")
 
-            # ---- exports: summary.json to the browser, an HTML replay on the server
+            # ---- exports: summary.json to the browser, an HTML replay in the export folder
+            # on the server and to the browser (a name only: no server path can be typed)
             with page.expect_download(timeout=TIMEOUT_MS) as download:
                 page.get_by_role("button", name="download summary.json").click()
             summary = json.loads(Path(download.value.path()).read_text())
             assert summary["frames"] == app.replay.cursor
             assert summary["params"]["delta"] == 8.0
-            out = tmp_path / "replay.html"
-            replay_box = control(page, "replay file")
+            replay_box = control(page, "replay name")
             replay_box.click()
-            replay_box.fill(str(out))
+            replay_box.fill("../my replay.html")
             replay_box.press("Enter")
-            until(lambda: app.replay_path.value == str(out), WAIT_S, "the replay path")
-            page.get_by_role("button", name="save HTML replay").click()
+            until(lambda: app.replay_path.value == "../my replay.html", WAIT_S, "the name")
+            with page.expect_download(timeout=120_000) as download:
+                page.get_by_role("button", name="save HTML replay").click()
             export = page.locator("#cogmap-export")
             until(lambda: "saved the HTML replay" in export.inner_text(), 120, "the replay")
+            assert "as my_replay.html in the export folder" in export.inner_text()
+            out = exports / "my_replay.html"
+            assert sorted(p.name for p in exports.iterdir()) == ["my_replay.html"]
             umask = os.umask(0)
             os.umask(umask)
             assert out.stat().st_mode & 0o777 == 0o666 & ~umask
             assert "cogmap replay" in out.read_text()[:20000]
+            assert download.value.suggested_filename == "my_replay.html"
+            assert Path(download.value.path()).read_bytes() == out.read_bytes()
             page.screenshot(path=str(ARTIFACTS / "browser-final.png"))
             shots.append(ARTIFACTS / "browser-final.png")
         finally:
@@ -365,3 +375,59 @@ def test_the_page_in_chromium(
             print(f"  {label:>10}: {took * 1000:6.0f} ms")
         print(f"  median {statistics.median(latencies.values()) * 1000:.0f} ms")
         print("browser screenshots: " + ", ".join(str(s) for s in shots))
+
+
+def test_chromium_keeps_other_origins_out_and_the_token_holder_in(
+    short_bag: Path, tmp_path: Path
+) -> None:
+    """Issue 24: a page of another port opens no websocket; a tab with the token's URL works."""
+    _require_browser()
+    import functools
+    import http.server
+    import threading
+
+    import viser
+    from playwright.sync_api import sync_playwright
+
+    from app.server.access import AccessPolicy
+    from app.server.app import CogmapApp
+
+    token = "t" * 32
+    server = support.make_server(AccessPolicy(token=token))
+    app = CogmapApp(server, short_bag, autoplay=False, export_dir=tmp_path / "exports")
+    port = server.get_port()
+    (tmp_path / "evil.html").write_text(
+        "<script>window.result = 'pending';"
+        f"const ws = new WebSocket('ws://127.0.0.1:{port}/?token={token}', "
+        f"['viser-v{viser.__version__}']);"
+        "ws.onopen = () => { window.result = 'open'; };"
+        "ws.onerror = () => { window.result = 'refused'; };</script>"
+    )
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(tmp_path))
+    evil = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=evil.serve_forever, daemon=True).start()
+    try:
+        app.start()
+        wait(app)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            try:
+                page = browser.new_page()
+                for host in ("127.0.0.1", "localhost"):  # another port; another host name
+                    page.goto(f"http://{host}:{evil.server_port}/evil.html", timeout=TIMEOUT_MS)
+                    page.wait_for_function("window.result !== 'pending'", timeout=TIMEOUT_MS)
+                    assert page.evaluate("window.result") == "refused"
+                assert app.server.get_clients() == {}
+                page.goto(f"http://127.0.0.1:{port}/", timeout=TIMEOUT_MS)
+                assert "needs its token" in page.content()
+                page.goto(f"http://127.0.0.1:{port}/?token={token}", timeout=TIMEOUT_MS)
+                page.locator("#cogmap-status").wait_for(timeout=TIMEOUT_MS)
+                until(lambda: len(app.views) == 1, WAIT_S, "the tab's view")
+                page.get_by_role("button", name="play", exact=True).click()
+                until(lambda: app.replay.playing, WAIT_S, "play from the tab")
+            finally:
+                browser.close()
+    finally:
+        evil.shutdown()
+        app.stop()
+        server.stop()

@@ -142,6 +142,9 @@ def test_bad_arguments_fail_fast_with_one_line(capsys: pytest.CaptureFixture[str
 
 
 def test_display_url() -> None:
-    assert display_url("0.0.0.0", 8080) == "http://localhost:8080"
+    # every interface: this machine's name (colleagues open it), with the token (issue 24)
+    assert (
+        display_url("0.0.0.0", 8080, "t0k3n") == f"http://{socket.gethostname()}:8080/?token=t0k3n"
+    )
     assert display_url("127.0.0.1", 81) == "http://127.0.0.1:81"
     assert display_url("::1", 8080) == "http://[::1]:8080"

@@ -151,7 +151,10 @@ def test_the_page_and_the_replay_judge_a_log_with_its_own_tolerances(
 def test_opening_a_bag_after_a_log_shows_the_camera_and_the_bag_defaults(
     square_log: Path, short_bag: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    with running_app(square_log, params=LOG_MAP_PARAMS, defaults=LOG_MAP_PARAMS) as app:
+    folders = [square_log.parent, short_bag.parent]  # the bag is one of the data folders'
+    with running_app(
+        square_log, params=LOG_MAP_PARAMS, defaults=LOG_MAP_PARAMS, data_dirs=folders
+    ) as app:
         wait(app)
         assert not app.camera_image.visible and "cogmap-links" in app.links_html.content
 
@@ -160,7 +163,9 @@ def test_opening_a_bag_after_a_log_shows_the_camera_and_the_bag_defaults(
 
         # open_bag opened it as a bag: the new replay is told so, not left to sniff the file
         monkeypatch.setattr(detect, "detect_format", sniffed)
-        assert app.open_bag(str(short_bag))
+        listed = f"{short_bag.parent.name}/{short_bag.name}"  # (two folders: named by folder)
+        assert listed in app.refresh_bags()
+        assert app.open_bag(listed)
         wait(app)
         assert app.replay.format == "bag" and app.replay.message == ""
         assert app.replay.has_camera and app.camera_image.visible

@@ -464,28 +464,28 @@ def test_cluster_log_is_an_html_table(short_bag: Path, reference: SlamSession) -
 def test_open_another_bag_from_the_page(
     short_bag: Path, reference: SlamSession, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    other = tmp_path / "copy.recording"  # a ROS 1 bag is one whatever its name (as for serve)
+    data = tmp_path / "data"
+    (data / "sub").mkdir(parents=True)
+    other = data / "copy.recording"  # a ROS 1 bag is one whatever its name (as for serve)
     shutil.copy(short_bag, other)
     shutil.copy(short_bag.with_suffix(".frontend.json"), other.with_suffix(".frontend.json"))
-    (tmp_path / "notes.txt").write_text("not a bag")
-    (tmp_path / "broken.bag").write_bytes(b"#ROSBAG V2.0\n" + b"\0" * 100)
-    with running_app(short_bag) as app:
+    (data / "notes.txt").write_text("not a bag")
+    (data / "broken.bag").write_bytes(b"#ROSBAG V2.0\n" + b"\0" * 100)
+    (data / "sub" / "fake.bag").write_text("a text file named like a bag")
+    with running_app(short_bag, data_dirs=[data]) as app:
         wait(app)
         first = app.replay
-        for typed, said in (
-            ("", "type the path of a bag on the server (a ROS 1 .bag or a ROS 2 bag folder)"),
-            (str(tmp_path / "nope.bag"), f"not opened: bag {tmp_path / 'nope.bag'} does not exist"),
-            (str(tmp_path), f"not opened: {tmp_path} is a folder but not a ROS2 bag"),
-            (str(tmp_path / "notes.txt"), f"not opened: {tmp_path / 'notes.txt'} is not a ROS bag"),
-            (
-                str(tmp_path / "broken.bag"),
-                f"not opened: {tmp_path / 'broken.bag'} has a damaged bag header; it is corrupt",
-            ),
+        # the page lists the bags of the data folder, by their paths relative to it
+        assert tuple(app.bag_dropdown.options) == ("broken.bag", "copy.recording", "sub/fake.bag")
+        for chosen, said in (
+            ("broken.bag", "not opened: broken.bag has a damaged bag header; it is corrupt"),
+            ("sub/fake.bag", "not opened: sub/fake.bag is not a ROS bag"),
+            (str(data / "nope.bag"), f"not opened: {str(data / 'nope.bag')!r} is not one of"),
         ):
-            app.bag_box.value = typed
-            app.open_button.value = True
+            assert app.open_bag(chosen) is False
             message = html.unescape(app.open_md.content)
-            assert said in message and "cogmap-error" in message, typed
+            assert said in message and "cogmap-error" in message, chosen
+            assert str(tmp_path) not in message.replace(repr(str(data / "nope.bag")), "")
             assert app.replay is first and first.alive
         opened_by_replays: list[Path] = []
         real_open_source = replay_module.open_source
@@ -495,9 +495,12 @@ def test_open_another_bag_from_the_page(
             return real_open_source(path, *args, **kwargs)  # type: ignore[arg-type]
 
         monkeypatch.setattr(replay_module, "open_source", counting_open_source)
-        app.bag_box.value = str(other)
-        app.open_button.value = True
-        assert f"opened {other}" in html.unescape(app.open_md.content)
+        app.bag_dropdown.value = "copy.recording"
+        app.open_button.value = True  # (opened on a thread of its own)
+        opening = app._opening
+        assert opening is not None
+        opening.join(30)
+        assert "opened copy.recording (" in html.unescape(app.open_md.content)
         assert app.replay is not first and not first.alive
         # readers that took `app.replay.lock` before the swap held the new replay's lock too
         assert app.replay.lock is first.lock
@@ -512,18 +515,22 @@ def test_open_another_bag_from_the_page(
 def test_html_replay_is_titled_captioned_quiet_and_normally_readable(
     short_bag: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    with running_app(short_bag) as app:
+    with running_app(short_bag, export_dir=tmp_path / "out") as app:
         wait(app)
-        app.replay_path.value = str(tmp_path / "out" / "replay.html")
+        app.replay_path.value = "replay.html"  # a name: the replay goes to the export folder
         capfd.readouterr()
         umask = os.umask(0o022)
         try:
-            app._save_replay(None).join(120)
+            saving = app._save_replay(None)
+            assert saving is not None
+            saving.join(120)
         finally:
             os.umask(umask)
         printed = capfd.readouterr()
         assert "Server stopped" not in printed.out + printed.err  # (viser's own server)
-        assert "saved the HTML replay" in app.export_md.content
+        assert "saved the HTML replay as replay.html in the export folder" in (
+            app.export_md.content
+        )
         out = tmp_path / "out" / "replay.html"
         assert out.stat().st_mode & 0o777 == 0o644
         page = out.read_text()

@@ -7,9 +7,9 @@ must equal it (and its ``rebuild`` results) exactly.
 from __future__ import annotations
 
 import contextlib
-import io
 import math
 import re
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -20,6 +20,7 @@ import pytest
 import viser
 from websockets.sync.client import ClientConnection, connect
 
+from app.server.access import AccessPolicy, guarded_server
 from app.server.app import CogmapApp
 from cogmap_core.cognitive_map import CognitiveMap
 from cogmap_core.datasets import MazeConfig, generate_maze_bag, open_bag
@@ -45,9 +46,9 @@ def reference(short_bag: Path) -> SlamSession:
     return session
 
 
-def make_server() -> viser.ViserServer:
-    with contextlib.redirect_stdout(io.StringIO()):
-        return viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+def make_server(policy: AccessPolicy | None = None) -> viser.ViserServer:
+    """A viser server on loopback (a port the OS chooses), guarded as ``cogmap serve``'s."""
+    return guarded_server("127.0.0.1", 0, policy or AccessPolicy(), quiet=True)
 
 
 @contextlib.contextmanager
@@ -55,13 +56,15 @@ def running_app(bag: Path, **kwargs: object) -> Iterator[CogmapApp]:
     """A started app on a private server (port chosen by the OS), stopped afterwards."""
     server = make_server()
     kwargs.setdefault("speed", math.inf)
-    app = CogmapApp(server, bag, **kwargs)  # type: ignore[arg-type]
-    try:
-        app.start()
-        yield app
-    finally:
-        app.stop()
-        server.stop()
+    with tempfile.TemporaryDirectory(prefix="cogmap-exports-") as exports:
+        kwargs.setdefault("export_dir", Path(exports))  # (never the user's cache)
+        app = CogmapApp(server, bag, **kwargs)  # type: ignore[arg-type]
+        try:
+            app.start()
+            yield app
+        finally:
+            app.stop()
+            server.stop()
 
 
 def wait(app: CogmapApp) -> None:

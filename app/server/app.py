@@ -17,12 +17,14 @@ What is shared and what is each viewer's:
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import logging
 import math
 import threading
 import time
 import traceback
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +35,7 @@ import viser.uplot
 from app.server.assets import head_html, help_markdown
 from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, y_top
 from app.server.export import (
-    default_replay_path,
+    default_replay_name,
     g2o_bytes,
     save_html_replay,
     sizes_csv_bytes,
@@ -49,6 +51,7 @@ from app.server.figures import (
     figure_inputs,
     layout_radius_label,
 )
+from app.server.files import DataFile, DataFolders, ExportFolder, Scrubber, default_export_dir
 from app.server.params import (
     ADVANCED_SLIDERS,
     ALL_SLIDERS,
@@ -79,6 +82,7 @@ from app.server.view import ClientView, Pick, nearest_pick, swatch
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets import BagTopics, open_bag
+from cogmap_core.datasets.cache import cache_dir
 from cogmap_core.errors import CogmapError
 from cogmap_core.event_file import KIND_LINK
 from cogmap_core.frames import EventStep, Frame
@@ -160,7 +164,7 @@ class CogmapApp:
             bag's profile, as ``cogmap run``).
         speed: initial playback speed.
         autoplay: start playing as soon as the bag is open.
-        static_dir: folder of the page's assets; HTML replays go to its ``replays/``.
+        static_dir: folder of the page's assets.
         scene_hz: maximum map updates per second during playback.
         image_scale: JPEG decode reduction (1, 2, 4, 8).
         topics: the bag's topic names.
@@ -173,6 +177,10 @@ class CogmapApp:
             defaults of that kind of input).
         resume: a loaded session to show and continue on the bag (see :class:`Replay`); its
             parameters are the sliders' initial values.
+        export_dir: the folder "save HTML replay" writes into (default
+            ``$COGMAP_CACHE/exports``; see :mod:`app.server.files`).
+        data_dirs: the folders whose bags "open another bag" lists (default: the bag's folder;
+            the cache's for the built-in dataset).
 
     """
 
@@ -194,9 +202,20 @@ class CogmapApp:
         log: LogOptions | None = None,
         defaults: MapParams | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
+        export_dir: Path | None = None,
+        data_dirs: Sequence[Path] | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
         self.defaults = defaults or MapParams()
+        self.exports = ExportFolder(export_dir if export_dir is not None else default_export_dir())
+        if data_dirs is None:
+            data_dirs = [bag.parent if isinstance(bag, Path) else cache_dir()]
+        self.data = DataFolders(data_dirs)
+        self.scrubber: Scrubber = self.data.scrubber(self.exports)
+        self._bags: dict[str, DataFile] = {}
+        self._busy_lock = threading.Lock()  # one HTML replay saved, one bag opened at a time
+        self._saving: threading.Thread | None = None
+        self._opening: threading.Thread | None = None
         for spec in ALL_SLIDERS:
             check_spec(spec)
         self.server = server
@@ -387,8 +406,11 @@ class CogmapApp:
             self.g2o_button = gui.add_button("download map (.g2o)", icon=viser.Icon.DOWNLOAD)
             self.summary_button = gui.add_button("download summary.json", icon=viser.Icon.DOWNLOAD)
             self.sizes_button = gui.add_button("download sizes.csv", icon=viser.Icon.DOWNLOAD)
-            self.replay_path = gui.add_text(
-                "replay file", str(default_replay_path(self.static_dir, MapMode.COMPACT))
+            self.replay_path = gui.add_text(  # a file name: saved in the server's export folder
+                "replay name",
+                default_replay_name(MapMode.COMPACT),
+                hint="a file name; the replay is saved in the server's export folder and sent "
+                "to your browser",
             )
             self.replay_button = gui.add_button("save HTML replay", icon=viser.Icon.DEVICE_FLOPPY)
             self.export_md = gui.add_html("")
@@ -398,15 +420,18 @@ class CogmapApp:
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
         with gui.add_folder("Open another bag — shared", expand_by_default=False):
-            self.bag_box = gui.add_text(
-                "bag path", "", hint="a ROS 1 .bag or ROS 2 bag folder on the server"
+            names = self._list_bags()
+            self.bag_dropdown = gui.add_dropdown(
+                "bag", names, initial_value=names[0], hint="the bags in the server's data folders"
             )
+            self.refresh_button = gui.add_button("refresh the list", icon=viser.Icon.REFRESH)
             self.open_button = gui.add_button("open", icon=viser.Icon.FOLDER_OPEN)
             self.open_md = gui.add_html(
-                '<div class="cogmap-note" id="cogmap-open">A path on the server; the replay '
-                "starts over with it, for everyone.</div>"
+                '<div class="cogmap-note" id="cogmap-open">A bag of the data folders; the '
+                "replay starts over with it, for everyone.</div>"
             )
-        self.open_button.on_click(lambda _: self.open_bag(self.bag_box.value))
+        self.refresh_button.on_click(lambda _: self.refresh_bags())
+        self.open_button.on_click(lambda _: self._open_chosen())
 
     def _guard_inputs(self) -> None:
         """Check every value a client can send before viser applies it (see validation.py)."""
@@ -421,6 +446,7 @@ class CogmapApp:
             self.summary_button,
             self.sizes_button,
             self.replay_button,
+            self.refresh_button,
             self.open_button,
         ):
             gate.guard(button, click())
@@ -436,8 +462,8 @@ class CogmapApp:
                 label=spec.label,
                 note=self._param_note,
             )
-        gate.guard(self.replay_path, text())
-        gate.guard(self.bag_box, text())
+        gate.guard(self.replay_path, text(max_length=200))
+        gate.guard(self.bag_dropdown, choice(lambda: tuple(self.bag_dropdown.options)))
 
     def _add_param(self, spec: SliderSpec, params: MapParams) -> None:
         value = clamp_to_slider(spec, getattr(params, spec.name))
@@ -465,9 +491,9 @@ class CogmapApp:
         with self.replay.lock, self.scene_lock:
             self.streamer.show(self._default_modes)
             self.views_changed()
-        defaults = {str(default_replay_path(self.static_dir, m)) for m in MapMode}
-        if self.replay_path.value in defaults:  # keep a path the user typed
-            self.replay_path.value = str(default_replay_path(self.static_dir, modes[0]))
+        defaults = {default_replay_name(m) for m in MapMode}
+        if self.replay_path.value in defaults:  # keep a name the user typed
+            self.replay_path.value = default_replay_name(modes[0])
 
     def views_changed(self) -> None:
         """Stream what the views show (a view changed); the shown maps rebuild first."""
@@ -953,7 +979,7 @@ class CogmapApp:
             mcolor = "#b00020" if state is PlaybackState.ERROR or note else "#555"
             message = (
                 f'<div id="cogmap-message" style="color:{mcolor};font-size:0.85em;'
-                f'white-space:normal">{html.escape(r.message or note)}</div>'
+                f'white-space:normal">{html.escape(self.scrubber.scrub(r.message or note))}</div>'
             )
         return (
             f'<div id="cogmap-status" data-state="{state.value}" '
@@ -1161,11 +1187,14 @@ class CogmapApp:
                     inputs = summary_inputs(self.replay)  # a copy: its figures need no lock
                 else:
                     name, content = "sizes.csv", sizes_csv_bytes(self.replay)
-            if inputs is not None:
+            if inputs is not None:  # (the bag named as the page names it, not by its server path)
+                inputs = dataclasses.replace(inputs, dataset=self.data.shown(inputs.dataset))
                 name, content = "summary.json", summary_bytes(inputs)
         except Exception as exc:
             traceback.print_exc()
-            self.export_md.content = self._export_message(f"export failed: {exc}", error=True)
+            self.export_md.content = self._export_message(
+                f"export failed: {self.scrubber.scrub(str(exc))}", error=True
+            )
             return
         self.export_md.content = self._export_message(f"sent {name} ({len(content)} bytes)")
         targets = [client] if client is not None else list(self.server.get_clients().values())
@@ -1176,27 +1205,53 @@ class CogmapApp:
         cls = "cogmap-note cogmap-error" if error else "cogmap-note"
         return f'<div class="{cls}" id="cogmap-export">{html.escape(text_)}</div>'
 
-    def _save_replay(self, client: viser.ClientHandle | None) -> threading.Thread:
-        path = Path(self.replay_path.value).expanduser()
+    def _save_replay(self, client: viser.ClientHandle | None) -> threading.Thread | None:
+        """Save the HTML replay of ``client``'s view in the export folder and send it to ``client``.
+
+        The name is the box's, made safe (:func:`~app.server.files.safe_name`); one replay is
+        rendered at a time. Returns the thread rendering it (None when refused at once).
+        """
+        target = self.exports.target(self.replay_path.value)
         modes = self._view_of(client)
-        self.export_md.content = self._export_message(f"saving the HTML replay to {path} …")
-
-        def work() -> None:
-            try:
-                saved = save_html_replay(self.replay, modes, path, static_dir=self.static_dir)
-            except CogmapError as exc:
-                self.export_md.content = self._export_message(f"replay not saved: {exc}", True)
-                return
-            except Exception as exc:
-                traceback.print_exc()
+        with self._busy_lock:
+            if self._saving is not None and self._saving.is_alive():
                 self.export_md.content = self._export_message(
-                    f"replay not saved: {type(exc).__name__}: {exc}", True
+                    "a replay is being saved; try again when it is done", error=True
                 )
-                return
-            self.export_md.content = self._export_message(f"saved the HTML replay to {saved}")
+                return None
+            self.export_md.content = self._export_message(
+                f"saving the HTML replay as {target.name} in the export folder …"
+            )
 
-        thread = threading.Thread(target=work, name="cogmap-html-replay", daemon=True)
-        thread.start()
+            def send(page: bytes) -> None:
+                if client is not None:
+                    client.send_file_download(target.name, page, save_immediately=True)
+
+            def work() -> None:
+                try:
+                    self.exports.prepare(target)
+                    save_html_replay(
+                        self.replay, modes, target, static_dir=self.static_dir, sent=send
+                    )
+                except CogmapError as exc:
+                    self.export_md.content = self._export_message(
+                        f"replay not saved: {self.scrubber.scrub(str(exc))}", True
+                    )
+                    return
+                except Exception as exc:
+                    traceback.print_exc()
+                    self.export_md.content = self._export_message(
+                        f"replay not saved: {type(exc).__name__}", True
+                    )
+                    return
+                self.export_md.content = self._export_message(
+                    f"saved the HTML replay as {target.name} in the export folder"
+                    + (" and sent it to your browser" if client is not None else "")
+                )
+
+            thread = threading.Thread(target=work, name="cogmap-html-replay", daemon=True)
+            thread.start()
+            self._saving = thread
         return thread
 
     # ------------------------------------------------------------------ another bag
@@ -1204,36 +1259,74 @@ class CogmapApp:
         cls = "cogmap-note cogmap-error" if error else "cogmap-note"
         self.open_md.content = f'<div class="{cls}" id="cogmap-open">{html.escape(text_)}</div>'
 
-    def open_bag(self, typed: str) -> bool:
-        """Replay the bag at path ``typed`` (on the server) instead; errors go to the page."""
-        raw = typed.strip()
-        if not raw:
+    def _list_bags(self) -> tuple[str, ...]:
+        """List the bags of the data folders; the dropdown's options (never empty)."""
+        self._bags = {f.name: f for f in self.data.listing()}
+        return tuple(self._bags) or (NO_BAG,)
+
+    def refresh_bags(self) -> list[str]:
+        """List the bags of the data folders in the dropdown again; returns their names."""
+        names = self._list_bags()
+        if tuple(self.bag_dropdown.options) != names:
+            self.bag_dropdown.options = names
+        if self.bag_dropdown.value not in names:
+            self.bag_dropdown.value = names[0]
+        return list(self._bags)
+
+    def _open_chosen(self) -> threading.Thread | None:
+        """The open button: open the chosen bag on a thread of its own (one at a time)."""
+        name = self.bag_dropdown.value
+        with self._busy_lock:
+            if self._opening is not None and self._opening.is_alive():
+                self._open_message("another bag is being opened; wait for it", error=True)
+                return None
+            self._open_message(f"opening {name} …")
+            thread = threading.Thread(
+                target=self.open_bag, args=(name,), name="cogmap-open-bag", daemon=True
+            )
+            thread.start()
+            self._opening = thread
+        return thread
+
+    def open_bag(self, name: str) -> bool:
+        """Replay the bag listed as ``name`` (in the data folders) instead; errors go to the page.
+
+        Only the names of :meth:`refresh_bags`' list are opened; anything else -- a path, a
+        missing file, a folder -- gets the same one line. The file is checked again (a regular
+        file inside its folder, not too large) and opened by its resolved path, then checked
+        (a bag, with camera frames) before the current replay is replaced.
+        """
+        chosen = self._bags.get(name)
+        if chosen is None:
+            shown = name if len(name) <= 80 else name[:77] + "…"
             self._open_message(
-                "type the path of a bag on the server (a ROS 1 .bag or a ROS 2 bag folder)",
+                f"not opened: {shown!r} is not one of the bags in the data folders "
+                "(refresh the list to see new ones)",
                 error=True,
             )
             return False
-        path = Path(raw).expanduser()
         problem = None
         reader = None
         # opened once here, to refuse it before the running replay stops (the reader names what
-        # is wrong: no such path, neither a ROS 1 bag nor a ROS 2 bag folder, ...), then handed
-        # over to the new replay
+        # is wrong: neither a ROS 1 bag nor a ROS 2 bag, ...), then handed over to the new replay
         try:
-            reader = open_bag(path, topics=self._topics, image_scale=self._image_scale)
+            chosen = self.data.check(chosen)
+            reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
             frames = reader.info.frame_count
             if frames == 0:
-                problem = f"{path} has no camera frames on the image topic"
+                problem = f"{name} has no camera frames on the image topic"
         except CogmapError as exc:
-            problem = str(exc)
+            problem = self.scrubber.scrub(str(exc))
         except Exception as exc:
-            problem = f"cannot open {path}: {type(exc).__name__}: {exc}"
+            traceback.print_exc()
+            problem = f"cannot open {name}: {type(exc).__name__}"
         if problem is not None:
             if reader is not None:
                 reader.close()
             self._open_message(f"not opened: {problem}", error=True)
             return False
         assert reader is not None
+        path = chosen.path
         with self._switch_lock:
             old = self.replay
             params = old.params
@@ -1259,6 +1352,10 @@ class CogmapApp:
         if from_log:
             self.reset_button.label = self._reset_label()
             self.reset_params()  # the sliders show the bag's defaults (no rebuild: in use)
-        self._open_message(f"opened {path} ({frames} frames); replaying it for everyone")
+        self._open_message(f"opened {name} ({frames} frames); replaying it for everyone")
         self._sync_play_button()
         return True
+
+
+#: What the bag list shows when the data folders hold no bag.
+NO_BAG = "(no bag in the data folders)"

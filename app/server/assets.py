@@ -18,13 +18,17 @@ import urllib.parse
 from functools import cache
 from pathlib import Path
 
-from app.server.export import find_static_dir
-
 log = logging.getLogger(__name__)
 
 TITLE = "cogmap · compact cognitive map"
 #: Where ``pip install .`` puts ``static/``'s files (``[tool.setuptools.data-files]``).
 INSTALLED_ASSETS = Path("share") / "cogmap" / "static"
+
+
+def find_static_dir() -> Path:
+    """``static/`` of the source tree when running from it, else ``./static``."""
+    source = Path(__file__).resolve().parents[2] / "static"
+    return source if source.is_dir() else Path("static")
 
 
 def find_asset_dir() -> Path:

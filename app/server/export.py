@@ -15,18 +15,21 @@ import html
 import io
 import json
 import math
+import os
 import re
 import socket
-from collections.abc import Sequence
+import stat
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-import viser
 
 from app.pipeline import read_warnings, session_summary, source_description, write_sizes_csv
+from app.server.access import AccessPolicy, guarded_server
 from app.server.figures import false_link_times, truth_transform
+from app.server.files import REPLAY_MARKER, is_cogmap_replay
 from app.server.scene import MapExtras, SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
@@ -43,19 +46,11 @@ if TYPE_CHECKING:
 #: Key frames of an HTML replay and its playing time.
 REPLAY_KEYFRAMES = 240
 REPLAY_SECONDS = 40.0
-_EMBED_MARKER = "__VISER_EMBED_DATA__"
 
 
-def find_static_dir() -> Path:
-    """``static/`` of the source tree when running from it, else ``./static``."""
-    source = Path(__file__).resolve().parents[2] / "static"
-    return source if source.is_dir() else Path("static")
-
-
-def default_replay_path(static_dir: Path | None, mode: MapMode) -> Path:
-    """Where "save HTML replay" writes by default: ``static/replays/cogmap-replay-<map>.html``."""
-    base = static_dir if static_dir is not None else find_static_dir()
-    return base / "replays" / f"cogmap-replay-{mode.value}.html"
+def default_replay_name(mode: MapMode) -> str:
+    """The name "save HTML replay" proposes: ``cogmap-replay-<map>.html`` (in the export folder)."""
+    return f"cogmap-replay-{mode.value}.html"
 
 
 def g2o_bytes(cmap: CognitiveMap) -> bytes:
@@ -192,7 +187,12 @@ def replay_caption(
 
 
 def with_caption(page: str, caption: str, title: str) -> str:
-    """``page`` (viser's HTML) titled ``title``, with ``caption`` at the start of its body."""
+    """``page`` (viser's HTML) titled ``title``, with ``caption`` at the start of its body.
+
+    The head starts with :data:`~app.server.files.REPLAY_MARKER`: a file that does not is not
+    one of ours, and is never replaced.
+    """
+    page = re.sub(r"(<head[^>]*>)", lambda m: m.group(1) + REPLAY_MARKER, page, count=1)
     page = re.sub(r"<title>.*?</title>", f"<title>{html.escape(title)}</title>", page, count=1)
     if caption:
         page = re.sub(r"(<body[^>]*>)", lambda m: m.group(1) + caption, page, count=1)
@@ -220,8 +220,8 @@ def html_replay(
     parameters.
     """
     modes = tuple(modes)
-    with _quiet():
-        server = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
+    with _quiet():  # (guarded as the page's server is: no other origin reads the scene)
+        server = guarded_server("127.0.0.1", _free_port(), AccessPolicy(), label=None, quiet=True)
     try:
         streamer = SceneStreamer(server, modes)
         streamer.show(modes)
@@ -265,11 +265,15 @@ def save_html_replay(
     keyframes: int = REPLAY_KEYFRAMES,
     seconds: float = REPLAY_SECONDS,
     static_dir: Path | None = None,
+    sent: Callable[[bytes], None] | None = None,
 ) -> Path:
     """Write the HTML replay of ``replay`` up to its current frame to ``path`` (atomically).
 
-    The folder is checked writable before the page is rendered; the file gets the user's
-    normal permissions, and a failed write leaves an existing file as it was.
+    ``path`` is the server's choice (the page's: :class:`~app.server.files.ExportFolder`). The
+    folder is checked writable before the page is rendered; the file gets the user's normal
+    permissions, and a failed write leaves an existing file as it was. A file in the way is
+    replaced only if it is a regular file starting like a cogmap replay (its first 64 kB are
+    read, never more). ``sent`` receives the page written (to send it to a browser).
 
     Raises:
         InputFileError: ``path`` does not end in ``.html``, or is something else than a replay.
@@ -279,9 +283,13 @@ def save_html_replay(
     path = Path(path)
     if path.suffix.lower() not in (".html", ".htm"):
         raise InputFileError(f"{path}: an HTML replay must be saved as a .html file")
-    if path.exists() and not path.is_file():
+    try:
+        existing = os.lstat(path)
+    except OSError:
+        existing = None
+    if existing is not None and not stat.S_ISREG(existing.st_mode):
         raise InputFileError(f"{path} exists and is not a file; choose another path")
-    if path.exists() and _EMBED_MARKER not in path.read_text(encoding="utf-8", errors="replace"):
+    if existing is not None and not is_cogmap_replay(path):
         raise InputFileError(f"{path} exists and is not a cogmap replay; choose another path")
     with replay.lock:
         log = replay.session.log.truncated(replay.cursor)
@@ -301,4 +309,6 @@ def save_html_replay(
         write_text_atomic(path, page)
     except OSError as exc:
         raise output_error(path, exc) from None
+    if sent is not None:
+        sent(page.encode())
     return path

@@ -12,6 +12,13 @@ thread) is passed on to the real standard error. This costs a few microseconds p
 Where file descriptor 2 cannot be redirected (closed, or no pipes), images are decoded without
 the check. Damage that libjpeg itself does not notice (bytes overwritten so that the Huffman
 codes stay valid and end where they should: a fraction of random overwrites) goes through.
+
+Before anything is decoded, the size the image declares is read from its header (the JPEG
+frame header, SOF; a PNG's IHDR chunk) by :func:`image_size`: an image of more than
+:data:`MAX_IMAGE_PIXELS` pixels is refused (:class:`ImageTooLarge`) without allocating it (a
+4 kB JPEG can declare 65000 x 65000 pixels, which libjpeg would spend gigabytes and most of a
+minute on), and data that is neither JPEG nor PNG is not handed to OpenCV (which would also
+decode TIFF, WebP, OpenEXR, ... with their own decoders) but reported undecodable.
 """
 
 from __future__ import annotations
@@ -33,6 +40,72 @@ CORRUPTION_WARNINGS: tuple[str, ...] = (
 )
 
 _FD2_LOCK = threading.Lock()
+
+#: The largest camera image decoded, in pixels (width x height as its header declares them):
+#: 16.8 million, e.g. 4096 x 4096 or a 5472 x 3078 (17:10) frame; iRat frames have 99,840.
+MAX_IMAGE_PIXELS = 4096 * 4096
+
+_JPEG_SOI = b"\xff\xd8"
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: JPEG start-of-frame markers (baseline, extended, progressive, lossless; Huffman or arithmetic).
+_SOF_MARKERS = frozenset({0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD,
+                          0xCE, 0xCF})  # fmt: skip
+#: Markers without a length field (restart markers, SOI, TEM).
+_STANDALONE = frozenset({0x01, 0xD8, *range(0xD0, 0xD8)})
+
+
+class ImageTooLarge(ValueError):
+    """An image whose header declares more than :data:`MAX_IMAGE_PIXELS` pixels."""
+
+    def __init__(self, width: int, height: int) -> None:
+        """Record the declared size."""
+        super().__init__(
+            f"image of {width} x {height} pixels is larger than the {MAX_IMAGE_PIXELS:,} pixels "
+            "decoded"
+        )
+        self.width = width
+        self.height = height
+
+
+def image_size(data: bytes | NDArray[np.uint8]) -> tuple[int, int] | None:
+    """``(width, height)`` declared by a JPEG or PNG header, or None (neither, or no size found).
+
+    Reads the header only: the JPEG markers up to the first start-of-frame (each segment's
+    length is skipped, never its content), or the PNG's IHDR chunk. A JPEG whose frame header
+    gives height 0 (the height follows in a DNL marker, which no camera writes) has no size here.
+    """
+    buf = memoryview(data).cast("B") if not isinstance(data, bytes) else memoryview(data)
+    n = len(buf)
+    if n >= 24 and bytes(buf[:8]) == _PNG_SIGNATURE and bytes(buf[12:16]) == b"IHDR":
+        width = int.from_bytes(buf[16:20], "big")
+        height = int.from_bytes(buf[20:24], "big")
+        return (width, height) if width and height else None
+    if n < 4 or bytes(buf[:2]) != _JPEG_SOI:
+        return None
+    pos = 2
+    while pos + 4 <= n:
+        if buf[pos] != 0xFF:
+            return None  # not at a marker: damaged
+        marker = buf[pos + 1]
+        if marker == 0xFF:  # fill byte
+            pos += 1
+            continue
+        if marker in _STANDALONE:
+            pos += 2
+            continue
+        if marker in (0xD9, 0xDA):  # end of image, start of scan: no frame header before
+            return None
+        length = int.from_bytes(buf[pos + 2 : pos + 4], "big")
+        if length < 2:
+            return None
+        if marker in _SOF_MARKERS:
+            if pos + 9 > n or length < 7:
+                return None
+            height = int.from_bytes(buf[pos + 5 : pos + 7], "big")
+            width = int.from_bytes(buf[pos + 7 : pos + 9], "big")
+            return (width, height) if width and height else None
+        pos += 2 + length
+    return None
 
 
 class JpegDecoder:
@@ -66,7 +139,19 @@ class JpegDecoder:
         return self._write_fd is not None
 
     def decode(self, data: NDArray[np.uint8]) -> tuple[NDArray[np.uint8] | None, str | None]:
-        """Decode ``data``; returns ``(image or None, libjpeg's corruption warning or None)``."""
+        """Decode ``data``; returns ``(image or None, libjpeg's corruption warning or None)``.
+
+        Data that is neither a JPEG nor a PNG with a size in its header is not decoded (None).
+
+        Raises:
+            ImageTooLarge: the header declares more than :data:`MAX_IMAGE_PIXELS` pixels.
+
+        """
+        size = image_size(data)
+        if size is None:
+            return None, None
+        if size[0] * size[1] > MAX_IMAGE_PIXELS:
+            raise ImageTooLarge(*size)
         if self._write_fd is None:
             return cv2.imdecode(data, self.flag), None
         with _FD2_LOCK:

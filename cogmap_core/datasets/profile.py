@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from cogmap_core.errors import CogmapError, InputFileError
+from cogmap_core.fileio import loads_json
 from cogmap_core.frontend import FrontEndConfig
 
 PROFILE_SUFFIX = ".frontend.json"
@@ -49,7 +50,7 @@ def read_frontend_profile(bag: str | os.PathLike[str]) -> dict[str, Any]:
     if not path.exists():
         return {}
     try:
-        data = json.loads(path.read_text())
+        data = loads_json(path.read_text())
         overrides = dict(data["frontend"])
         FrontEndConfig().with_changes(**overrides)  # validate names and ranges
     except (OSError, ValueError, KeyError, TypeError) as exc:

@@ -20,7 +20,8 @@ summarised by :attr:`BagReader.warnings`:
 
 - undecodable JPEG, JPEG that decodes but with libjpeg's "Corrupt JPEG data" / "Premature end
   of JPEG file" warnings (a scrambled image, see :mod:`.jpeg`), image of another size than the
-  first, undeserialisable message: skipped (the odometry carries over to the next frame);
+  first, image whose header declares more than :data:`~.jpeg.MAX_IMAGE_PIXELS` pixels (not
+  decoded), undeserialisable message: skipped (the odometry carries over to the next frame);
 - a clock that jumps back (ROS1): the bag's record times are checked in the order the messages
   were written; where a topic's record time goes back more than
   :data:`CLOCK_JUMP_TOLERANCE`, the two stretches would interleave in time order. With
@@ -65,7 +66,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 
 from cogmap_core.datasets.errors import BagError, BagMessageTypeError, BagTopicError
-from cogmap_core.datasets.jpeg import JpegDecoder
+from cogmap_core.datasets.jpeg import MAX_IMAGE_PIXELS, ImageTooLarge, JpegDecoder
 from cogmap_core.datasets.topics import (
     GROUND_TRUTH_TYPES,
     IMAGE_TYPE,
@@ -151,6 +152,7 @@ class ReadCounters:
     clock_jumps: int = 0
     clock_jump_messages_dropped: int = 0
     corrupt_chunks: int = 0
+    oversized_images: int = 0
     first_seen: dict[str, float] = field(default_factory=dict)
 
     def note(self, name: str, time: float) -> None:
@@ -189,6 +191,7 @@ _WARNING_TEXT = {
     "clock_jumps": "clock jump back (see the opening warning)",
     "clock_jump_messages_dropped": "message dropped at a clock jump",
     "corrupt_chunks": "corrupt bag data: reading stopped there, the frames before it kept",
+    "oversized_images": f"camera image larger than {MAX_IMAGE_PIXELS:,} pixels skipped undecoded",
 }
 
 
@@ -619,6 +622,7 @@ class BagReader:
         gt_prev: tuple[float, float, float, float] | None = None
         pending: deque[tuple[float, NDArray[np.uint8], float, float]] = deque()
         images_seen = images_decoded = 0
+        largest: tuple[int, int] | None = None  # the first oversized image's declared size
         index = 0
         now = 0.0
 
@@ -699,7 +703,12 @@ class BagReader:
                         counters.note("image_stamps_backwards", now)
                         continue
                     data = np.asarray(msg.data, dtype=np.uint8)
-                    image, damage = decoder.decode(data) if data.size else (None, None)
+                    try:
+                        image, damage = decoder.decode(data) if data.size else (None, None)
+                    except ImageTooLarge as exc:  # refused from its header, never allocated
+                        counters.note("oversized_images", now)
+                        largest = largest or (exc.width, exc.height)
+                        continue
                     if image is None:
                         counters.note("undecodable_images", now)
                         continue
@@ -747,6 +756,12 @@ class BagReader:
             while pending:
                 fd = pending.popleft()
                 yield release(fd, held(fd[0]))
+            if images_seen and counters.oversized_images == images_seen and largest:
+                raise BagError(
+                    f"all {images_seen} camera images in {self.path} are larger than the "
+                    f"{MAX_IMAGE_PIXELS:,} pixels cogmap decodes (the first declares "
+                    f"{largest[0]} x {largest[1]}); check the camera topic"
+                )
             if images_seen and not images_decoded:
                 raise BagError(
                     f"none of the {images_seen} camera images in {self.path} could be decoded as "

@@ -13,6 +13,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from cogmap_core.config import is_finite_number, short_repr
 from cogmap_core.errors import ParameterError
 
 # name -> (lower, lower inclusive?, upper, upper inclusive?, integer?, meaning)
@@ -225,8 +226,7 @@ def _validate_parameter(name: str, value: object) -> None:
     if integer:
         ok = isinstance(value, int) and not isinstance(value, bool)
     else:
-        ok = isinstance(value, int | float) and not isinstance(value, bool)
-        ok = ok and math.isfinite(value)  # type: ignore[arg-type]
+        ok = is_finite_number(value)
     if ok:
         v = float(value)  # type: ignore[arg-type]
         ok = (v >= low if low_inc else v > low) and (v <= high if high_inc else v < high)
@@ -235,6 +235,6 @@ def _validate_parameter(name: str, value: object) -> None:
         lb = "[" if low_inc else "("
         rb = "]" if high_inc else ")"
         raise ParameterError(
-            f"{name}={value!r} is out of range: {meaning} must be {kind} in "
+            f"{name}={short_repr(value)} is out of range: {meaning} must be {kind} in "
             f"{lb}{low:g}, {high:g}{rb}"
         )
