@@ -122,7 +122,7 @@ def _serve(args: argparse.Namespace) -> int:
             raise InputFileError(
                 f"{bag_path}: no such bag; --resume continues on an existing .bag file"
             )
-        resume = resume_session(args.resume, frontend_from_args(args, bag_path), 4, changes)
+        resume = resume_session(args.resume, frontend_from_args(args, bag_path), 1, changes)
         print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     from app.server.access import guarded_server, is_loopback, policy_for
     from app.server.app import CogmapApp

@@ -94,7 +94,7 @@ class RunOptions:
 
     frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
     topics: BagTopics | None = None
-    image_scale: int = 4
+    image_scale: int = 1
     force: bool = False
     format: str | None = None  # bag, tuc, csv; None: detected from the content
     log: LogOptions = field(default_factory=LogOptions)  # how to read a log

@@ -85,7 +85,7 @@ except ImportError:  # pragma: no cover - Windows
 
 SWEEP_FORMAT = "cogmap-sweep"
 SWEEP_VERSION = 1
-IMAGE_SCALE = 4  # as cogmap run
+IMAGE_SCALE = 1  # as cogmap run: full size, for OpenRatSLAM's whole-pixel template blocks
 CELL_VERSION = 1  # bump when a cell's figures change meaning: old rows are then not reused
 
 RESULTS_FILE = "results.csv"

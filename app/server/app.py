@@ -194,7 +194,7 @@ class CogmapApp:
         autoplay: bool = True,
         static_dir: Path | None = None,
         scene_hz: float = 10.0,
-        image_scale: int = 4,
+        image_scale: int = 1,
         topics: BagTopics | None = None,
         rebuild_workers: int = 2,
         wait_for_viewer: bool = False,

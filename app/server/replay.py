@@ -204,7 +204,7 @@ class Replay:
         listener: ReplayListener,
         params: MapParams | None = None,
         frontend: FrontEndSource = None,
-        image_scale: int = 4,
+        image_scale: int = 1,
         speed: float = 1.0,
         autoplay: bool = True,
         priority: tuple[MapMode, ...] = (MapMode.COMPACT,),

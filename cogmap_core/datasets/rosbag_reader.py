@@ -78,6 +78,10 @@ from cogmap_core.frames import Frame
 
 log = logging.getLogger(__name__)
 
+#: A decoded frame waiting for its ground truth: time, image, translation, rotation and the
+#: odometry steps (one row per message).
+_FrameData = tuple[float, NDArray[np.uint8], float, float, NDArray[np.float64]]
+
 _DECODE_FLAGS = {
     1: cv2.IMREAD_GRAYSCALE,
     2: cv2.IMREAD_REDUCED_GRAYSCALE_2,
@@ -617,22 +621,29 @@ class BagReader:
         odom_prev: int | None = None
         backwards_run = 0
         trans = rot = 0.0
+        steps: list[tuple[float, float]] = []  # the same, message by message
         last_image_ns: int | None = None
         shape: tuple[int, ...] | None = None
         gt_prev: tuple[float, float, float, float] | None = None
-        pending: deque[tuple[float, NDArray[np.uint8], float, float]] = deque()
+        pending: deque[_FrameData] = deque()
         images_seen = images_decoded = 0
         largest: tuple[int, int] | None = None  # the first oversized image's declared size
         index = 0
         now = 0.0
 
-        def release(frame_data: tuple[float, NDArray[np.uint8], float, float], pose: Any) -> Frame:
+        def release(frame_data: _FrameData, pose: Any) -> Frame:
             nonlocal index
-            t, image, tr, ro = frame_data
+            t, image, tr, ro, odometry_steps = frame_data
             if pose is None and gt_topic is not None:
                 counters.note("frames_without_ground_truth", t)
             frame = Frame(
-                index=index, time=t, image=image, translation=tr, rotation=ro, ground_truth=pose
+                index=index,
+                time=t,
+                image=image,
+                translation=tr,
+                rotation=ro,
+                ground_truth=pose,
+                odometry_steps=odometry_steps,
             )
             index += 1
             counters.frames += 1
@@ -692,10 +703,12 @@ class BagReader:
                     dt = dt_ns / 1e9
                     trans += v * dt
                     rot += w * dt
+                    steps.append((v * dt, w * dt))
 
                 elif topic == image_topic:
                     if stamp < start_ns:  # before the requested start: consume, do not decode
                         trans = rot = 0.0
+                        steps = []
                         last_image_ns = stamp
                         continue
                     images_seen += 1
@@ -722,8 +735,9 @@ class BagReader:
                         counters.note("image_size_changes", now)
                         continue
                     last_image_ns = stamp
-                    frame_data = (now, image, trans, rot)
+                    frame_data = (now, image, trans, rot, np.array(steps).reshape(-1, 2))
                     trans = rot = 0.0
+                    steps = []
                     if gt_topic is None:
                         yield release(frame_data, None)
                     else:

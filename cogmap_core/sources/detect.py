@@ -184,7 +184,7 @@ def open_source(
     fmt: str | None = None,
     *,
     topics: BagTopics | None = None,
-    image_scale: int = 4,
+    image_scale: int = 1,
     log: LogOptions | None = None,
     on_clock_jump: str = "drop",
     on_corrupt: str = "error",
