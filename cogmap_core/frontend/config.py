@@ -52,6 +52,18 @@ _RANGES: dict[str, tuple[float, bool, float, bool, bool, str]] = {
     "pc_update_per_odometry": (0, True, 1, True, True, "1 = a pose-cell update per odometry"),
     "pc_inject_nearest": (0, True, 1, True, True, "1 = inject at the nearest cell, 0 = truncate"),
     "pc_edge_loss": (0, True, 1, True, True, "1 = OpenRatSLAM's wrap that loses two edge cells"),
+    "vtrans_image_x_min": (0, True, 100_000, True, True, "first column of the speed strip (px)"),
+    "vtrans_image_x_max": (1, True, 100_000, True, True, "end of the speed strip's columns (px)"),
+    "vtrans_image_y_min": (0, True, 100_000, True, True, "first row of the speed strip (px)"),
+    "vtrans_image_y_max": (1, True, 100_000, True, True, "end of the speed strip's rows (px)"),
+    "vrot_image_x_min": (0, True, 100_000, True, True, "first column of the rotation strip (px)"),
+    "vrot_image_x_max": (1, True, 100_000, True, True, "end of the rotation strip's columns (px)"),
+    "vrot_image_y_min": (0, True, 100_000, True, True, "first row of the rotation strip (px)"),
+    "vrot_image_y_max": (1, True, 100_000, True, True, "end of the rotation strip's rows (px)"),
+    "camera_fov_deg": (0.0, False, 360.0, True, False, "camera field of view (deg)"),
+    "camera_hz": (0.0, True, 1000.0, True, False, "camera rate (Hz; 0 = the frame times')"),
+    "vtrans_scaling": (0.0, False, 1e9, True, False, "speed per unit of profile difference"),
+    "vtrans_max": (0.0, False, 1e6, True, False, "largest visual speed (m/s)"),
 }
 
 #: cogmap's own front-end arithmetic before it followed OpenRatSLAM's (issue 26): the area mean
@@ -138,6 +150,23 @@ class FrontEndConfig:
             along one axis only, is dropped (its loops start at 1; the normalisation later
             rescales the rest); 0 = everything wraps around.
 
+    Visual odometry (camera-only inputs; OpenRatSLAM's ``visual_odometry.cpp`` and its names):
+
+    Attributes:
+        vtrans_image_x_min, vtrans_image_x_max, vtrans_image_y_min, vtrans_image_y_max: the
+            image strip (reference pixels, end exclusive) whose column intensity profile gives
+            the speed: the mean absolute difference to the previous frame's profile at the best
+            shift, times ``vtrans_scaling``, at most ``vtrans_max`` (m/s).
+        vrot_image_x_min, vrot_image_x_max, vrot_image_y_min, vrot_image_y_max: the strip whose
+            profile's best shift (at most 40 columns either way) gives the rotation.
+        camera_fov_deg: horizontal field of view of the whole image (OpenRatSLAM: 50).
+        camera_hz: camera rate that turns a shift per frame into a rate (OpenRatSLAM: 10); 0
+            (the default) takes each frame's own interval, so a shift of ``s`` columns is a turn
+            of ``s * camera_fov_deg / width`` whatever the rate.
+        vtrans_scaling: metres per second per unit of mean profile difference (OpenRatSLAM:
+            100).
+        vtrans_max: largest speed the visual odometry reports (OpenRatSLAM: 20 m/s).
+
     """
 
     reference_image_width: int = 416
@@ -174,6 +203,18 @@ class FrontEndConfig:
     pc_update_per_odometry: int = 1
     pc_inject_nearest: int = 0
     pc_edge_loss: int = 1
+    vtrans_image_x_min: int = 0
+    vtrans_image_x_max: int = 416
+    vtrans_image_y_min: int = 0
+    vtrans_image_y_max: int = 240
+    vrot_image_x_min: int = 0
+    vrot_image_x_max: int = 416
+    vrot_image_y_min: int = 0
+    vrot_image_y_max: int = 240
+    camera_fov_deg: float = 50.0
+    camera_hz: float = 0.0
+    vtrans_scaling: float = 100.0
+    vtrans_max: float = 20.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range and inconsistent combinations."""
@@ -205,6 +246,16 @@ class FrontEndConfig:
                 f"image_crop_y_min={self.image_crop_y_min} is out of range: must be in "
                 f"[0, image_crop_y_max={self.image_crop_y_max})"
             )
+        sizes = (("x", self.reference_image_width), ("y", self.reference_image_height))
+        for strip in ("vtrans", "vrot"):
+            for axis, size in sizes:
+                low = getattr(self, f"{strip}_image_{axis}_min")
+                high = getattr(self, f"{strip}_image_{axis}_max")
+                if not low < high <= size:
+                    fail(
+                        f"{strip}_image_{axis}_min={low}, {strip}_image_{axis}_max={high} are out "
+                        f"of range: need 0 <= min < max <= {size} (the reference image)"
+                    )
         if 2 * self.vt_shift_match >= self.template_x_size:
             fail(
                 f"vt_shift_match={self.vt_shift_match} is out of range: must be in "

@@ -482,12 +482,19 @@ class _BlockPlan:
         self.cols = slice(x0, x0 + self.bx * out_x)
         self.out_x, self.out_y = out_x, out_y
         self.divisor = float(self.bx * self.by)
+        # block corners in the integral image of the used part
+        self.ys = np.arange(out_y + 1) * self.by
+        self.xs = np.arange(out_x + 1) * self.bx
 
     def resample(self, image: NDArray[np.uint8]) -> NDArray[np.float64]:
-        """Block means in [0, 1]: ``sum / 255 / pixels`` as OpenRatSLAM divides."""
+        """Block means in [0, 1]: ``sum / 255 / pixels`` as OpenRatSLAM divides.
+
+        The block sums are exact integers, from the integral image (OpenCV's, in float64: exact
+        up to 2^53).
+        """
         crop = image[self.rows, self.cols]
-        rows = crop.reshape(self.out_y, self.by, -1).sum(axis=1, dtype=np.int32)
-        sums = rows.reshape(self.out_y, self.out_x, self.bx).sum(axis=2, dtype=np.int32)
+        corners = cv2.integral(crop, sdepth=cv2.CV_64F)[np.ix_(self.ys, self.xs)]
+        sums = corners[1:, 1:] - corners[:-1, 1:] - corners[1:, :-1] + corners[:-1, :-1]
         return sums / 255.0 / self.divisor
 
 

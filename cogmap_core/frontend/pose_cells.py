@@ -89,8 +89,8 @@ class PoseCellNetwork:
         # OpenRatSLAM's lookups: cell i at angle (i + 1) 2 pi / n (1 is subtracted after atan2).
         angle_xy = (np.arange(self.n_xy) + 1.0) * 2.0 * math.pi / self.n_xy
         angle_th = (np.arange(self.n_th) + 1.0) * 2.0 * math.pi / self.n_th
-        self._sincos_xy = np.stack([np.sin(angle_xy), np.cos(angle_xy)], axis=1)
-        self._sincos_th = np.stack([np.sin(angle_th), np.cos(angle_th)], axis=1)
+        self._sincos_xy = np.stack([np.sin(angle_xy), np.cos(angle_xy)], axis=1).tolist()
+        self._sincos_th = np.stack([np.sin(angle_th), np.cos(angle_th)], axis=1).tolist()
         self.cells = np.zeros((self.n_th, self.n_xy, self.n_xy))
         bx = by = self.n_xy // 2
         bth = self.n_th // 2
@@ -301,12 +301,17 @@ def _permutations(n: int) -> FloatArray:
     return ((dst - src) % n == m).astype(np.float64)
 
 
-def _ors_decode(sums: FloatArray, cells: NDArray[np.intp], sincos: FloatArray, dim: int) -> float:
+def _ors_decode(
+    sums: FloatArray, cells: NDArray[np.intp], sincos: list[list[float]], dim: int
+) -> float:
     """OpenRatSLAM's circular mean of per-cell ``sums`` (at ``cells``): cells in index order."""
-    order = np.argsort(cells, kind="stable")
-    products = sincos[cells[order]] * sums[order][:, None]
-    s, c = np.cumsum(products, axis=0)[-1]  # sequential, as its loop over the cells
-    value = math.atan2(float(s), float(c)) * dim / (2.0 * math.pi) - 1.0
+    s = c = 0.0
+    # sequential double sums, as its loop over the cells (few: plain floats are fastest)
+    for cell, total in sorted(zip(cells.tolist(), sums.tolist(), strict=True)):
+        sin_cell, cos_cell = sincos[cell]
+        s += sin_cell * total
+        c += cos_cell * total
+    value = math.atan2(s, c) * dim / (2.0 * math.pi) - 1.0
     while value < 0:
         value += dim
     while value > dim:
