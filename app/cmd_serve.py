@@ -16,6 +16,7 @@ from app.cli_common import (
     add_input_arguments,
     add_map_arguments,
     add_topic_arguments,
+    camera_options_from_args,
     frontend_from_args,
     input_kind,
     log_options_from_args,
@@ -156,6 +157,7 @@ def _serve(args: argparse.Namespace) -> int:
         resume=resume,
         export_dir=export_dir,
         data_dirs=data_dirs,
+        camera=camera_options_from_args(args),
     )
     folders = ", ".join(str(d) for d in data_dirs)
     print(

@@ -127,8 +127,10 @@ def _lines(path: Path) -> list[str]:
 
 
 def pose_at(truth: NDArray[np.float64], t: float) -> tuple[float, float, float] | None:
-    """The true pose at ``t``: interpolated between poses at most :data:`GT_GAP` apart, else
-    the nearest within :data:`GT_HOLD`, else None.
+    """The true pose at ``t`` (None when there is none near).
+
+    Interpolated between poses at most :data:`GT_GAP` apart, else the nearest within
+    :data:`GT_HOLD`.
     """
     times = truth[:, 0]
     k = int(np.searchsorted(times, t, side="right"))
@@ -147,7 +149,12 @@ def pose_at(truth: NDArray[np.float64], t: float) -> tuple[float, float, float] 
 
 
 def frame_times(
-    count: int, times_file: Path | None, fps: float | None, own_fps: float, what: Path
+    count: int,
+    times_file: Path | None,
+    fps: float | None,
+    own_fps: float,
+    what: Path,
+    hint: str = "a times file",
 ) -> tuple[NDArray[np.float64], str]:
     """Each frame's time: from the times file, else ``--fps``, else the input's own rate.
 
@@ -168,8 +175,7 @@ def frame_times(
         return times, "times file"
     rate = fps if fps is not None else own_fps
     if not (rate > 0 and math.isfinite(rate)):
-        where = f"{times_file.name} beside it" if times_file is not None else "a times file"
-        raise InputFileError(f"{what}: no frame times: give the camera's rate (--fps) or {where}")
+        raise InputFileError(f"{what}: no frame times: give the camera's rate (--fps) or {hint}")
     return np.arange(count) / rate, "--fps" if fps is not None else "the video"
 
 

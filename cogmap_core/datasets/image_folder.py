@@ -62,7 +62,12 @@ class ImageFolderReader(CameraReader):
                 f"{folder}: no images in it ({', '.join(IMAGE_SUFFIXES)}); nothing to map"
             )
         times, source = frame_times(
-            len(self.files), _inside_or_beside(folder, "times.txt"), fps, 0.0, folder
+            len(self.files),
+            _inside_or_beside(folder, "times.txt"),
+            fps,
+            0.0,
+            folder,
+            "a times.txt in it (one time in s per image)",
         )
         gt_path = _inside_or_beside(folder, "groundtruth.txt")
         truth = read_ground_truth(gt_path) if gt_path.exists() else None

@@ -66,7 +66,10 @@ class VideoReader(CameraReader):
                     count += 1
         finally:
             capture.release()
-        times, source = frame_times(count, companion(path, "times.txt"), fps, own_fps, path)
+        times_file = companion(path, "times.txt")
+        times, source = frame_times(
+            count, times_file, fps, own_fps, path, f"{times_file.name} beside it"
+        )
         gt_path = companion(path, "groundtruth.txt")
         truth = read_ground_truth(gt_path) if gt_path.exists() else None
         super().__init__(path, times, truth, frontend)

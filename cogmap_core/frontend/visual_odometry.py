@@ -73,10 +73,13 @@ class VisualOdometry:
     def profiles(self, image: NDArray[np.uint8]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The speed and rotation strips' column profiles (means in [0, 1])."""
         out = []
-        for rows, cols in self._strips_for(image.shape):
+        strips = self._strips_for(image.shape)
+        for rows, cols in strips:
             strip = image[rows, cols]
             sums = strip.sum(axis=0, dtype=np.int64)
             out.append(sums / 255.0 / strip.shape[0])
+            if strips[0] == strips[1]:  # one strip for both: one profile
+                return out[0], out[0]
         return out[0], out[1]
 
     def step(self, image: NDArray[np.uint8], dt: float) -> tuple[float, float]:
@@ -86,8 +89,9 @@ class VisualOdometry:
         self._previous = (vtrans, vrot)
         if previous is None or dt <= 0.0:
             return 0.0, 0.0
-        difference, _ = best_shift(vtrans, previous[0])
-        _, shift = best_shift(vrot, previous[1])
+        difference, shift = best_shift(vtrans, previous[0])
+        if vrot is not vtrans:  # (one strip for both: the same search answers both)
+            _, shift = best_shift(vrot, previous[1])
         c = self.config
         speed = min(difference * c.vtrans_scaling, c.vtrans_max)
         turn = shift * c.camera_fov_deg / image.shape[1] * math.pi / 180.0  # per frame
@@ -103,13 +107,16 @@ def best_shift(data: NDArray[np.float64], old: NDArray[np.float64]) -> tuple[flo
     """
     n = len(data)
     mask, counts = _overlap(n)
-    pad = np.zeros(SHIFTS)
-    # rows o: old[k + o] and data[k + o] (windows of the zero-padded profiles, no copies)
-    old_shifted = np.lib.stride_tricks.sliding_window_view(np.concatenate([old, pad]), n)
-    data_shifted = np.lib.stride_tricks.sliding_window_view(np.concatenate([data, pad]), n)
+    padded = np.zeros((2, n + SHIFTS))
+    padded[0, :n] = old
+    padded[1, :n] = data
+    # rows o: old[k + o] and data[k + o] (overlapping windows of the zero-padded profiles)
+    step = padded.strides[1]
+    old_shifted = np.lib.stride_tricks.as_strided(padded[0], (SHIFTS, n), (step, step))
+    data_shifted = np.lib.stride_tricks.as_strided(padded[1], (SHIFTS, n), (step, step))
     both = np.empty((2 * SHIFTS, n))
-    np.subtract(data, old_shifted[:SHIFTS], out=both[:SHIFTS])
-    np.subtract(data_shifted[:SHIFTS], old, out=both[SHIFTS:])
+    np.subtract(data, old_shifted, out=both[:SHIFTS])
+    np.subtract(data_shifted, old, out=both[SHIFTS:])
     np.abs(both, out=both)
     both *= mask  # only the overlapping k < n - o
     means = both.sum(axis=1) / counts
