@@ -118,13 +118,15 @@ class PoseCellNetwork:
         """Local excitation, local inhibition, global inhibition and normalisation."""
         p = self.cells
         n_th, n = self.n_th, self.n_xy
-        q = p @ self._e_xy
-        q = np.matmul(self._e_xy_t, q)
-        q = (self._e_th_t @ q.reshape(n_th, n * n)).reshape(n_th, n, n)
-        r = q @ self._i_xy
-        r = np.matmul(self._i_xy_t, r)
-        r = (self._i_th_t @ r.reshape(n_th, n * n)).reshape(n_th, n, n)
-        q -= r
+        # Each spread along x or y is one matrix product over all rows of the network: the
+        # layers are transposed in between ([th, y, x] -> [th, x, y] -> [th, y, x]).
+        a = (p.reshape(-1, n) @ self._e_xy).reshape(n_th, n, n)  # along x
+        a = a.transpose(0, 2, 1).reshape(-1, n) @ self._e_xy  # along y: [th, x, y]
+        q_xy = self._e_th_t @ a.reshape(n_th, n * n)  # along theta
+        r = (q_xy.reshape(-1, n) @ self._i_xy).reshape(n_th, n, n)  # along y
+        r = r.transpose(0, 2, 1).reshape(-1, n) @ self._i_xy  # along x: [th, y, x]
+        r = self._i_th_t @ r.reshape(n_th, n * n)  # along theta
+        q = q_xy.reshape(n_th, n, n).transpose(0, 2, 1) - r.reshape(n_th, n, n)
         q -= self.config.pc_global_inhib
         np.maximum(q, 0.0, out=q)
         total = float(q.sum())
