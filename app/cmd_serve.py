@@ -157,7 +157,13 @@ def _serve(args: argparse.Namespace) -> int:
         resume=resume,
         export_dir=export_dir,
         data_dirs=data_dirs,
-        camera=camera_options_from_args(args),
+        # (the visual odometry of a named camera input takes the --frontend overrides too)
+        camera=camera_options_from_args(
+            args,
+            frontend_from_args(args, Path(args.bag))
+            if args.bag is not None and kind.has_camera
+            else None,
+        ),
     )
     folders = ", ".join(str(d) for d in data_dirs)
     print(
