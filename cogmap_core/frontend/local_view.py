@@ -493,7 +493,7 @@ class _BlockPlan:
         up to 2^53).
         """
         crop = image[self.rows, self.cols]
-        corners = cv2.integral(crop, sdepth=cv2.CV_64F)[np.ix_(self.ys, self.xs)]
+        corners = cv2.integral(crop, sdepth=cv2.CV_64F).take(self.ys, axis=0).take(self.xs, axis=1)
         sums = corners[1:, 1:] - corners[:-1, 1:] - corners[1:, :-1] + corners[:-1, :-1]
         return sums / 255.0 / self.divisor
 
