@@ -15,6 +15,7 @@ from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.sources.detect import (
     FORMATS,
     KINDS,
+    CameraOptions,
     InputKind,
     LogOptions,
     check_companions,
@@ -144,14 +145,33 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
         nargs="?",
         default=None,
         metavar="FILE",
-        help="iRat-layout ROS bag, TUC input file or CSV odometry file",
+        help="iRat-layout ROS bag, video file, folder of images, TUC input file or CSV "
+        "odometry file",
     )
     parser.add_argument(
         "--format",
         choices=("auto", *FORMATS),
         default="auto",
         help="input kind (default auto: detected from the content): bag (ROS bag with camera), "
+        "video (a video file, camera only), images (a folder of images, camera only), "
         "tuc (TUC SLAM dataset odom2/loop lines), csv (time,v,omega odometry)",
+    )
+    parser.add_argument(
+        "--odometry",
+        choices=("auto", "wheel", "visual"),
+        default="auto",
+        help="a bag's motion: its odometry topic (wheel), the camera's as RatSLAM's visual "
+        "odometry computes it (visual), or auto (default: the topic if the bag has it); videos "
+        "and image folders always use visual odometry (settings: --frontend camera_fov_deg=..., "
+        "vtrans_scaling=..., ...)",
+    )
+    parser.add_argument(
+        "--fps",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="frame rate of a video or image folder without a times file (default: the "
+        "video's own rate; an image folder needs times.txt or this)",
     )
     parser.add_argument(
         "--loops",
@@ -174,6 +194,13 @@ def input_kind(args: argparse.Namespace, path: Path) -> InputKind:
     name = resolve_format(path, args.format)
     check_companions(name, args.loops, args.ground_truth)
     return KINDS[name]
+
+
+def camera_options_from_args(
+    args: argparse.Namespace, frontend: FrontEndConfig | None = None
+) -> CameraOptions:
+    """How to read a camera input: ``--odometry``, ``--fps`` and the front-end settings."""
+    return CameraOptions(odometry=args.odometry, fps=args.fps, frontend=frontend)
 
 
 def log_options_from_args(args: argparse.Namespace) -> LogOptions:
@@ -200,7 +227,7 @@ def add_frontend_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _overrides(items: list[str]) -> dict[str, float]:
-    overrides: dict[str, float] = {}
+    overrides: dict[str, float] = {}  # an integer literal stays an int (integer settings)
     for item in items:
         key, sep, value = item.partition("=")
         if not sep:
@@ -208,7 +235,8 @@ def _overrides(items: list[str]) -> dict[str, float]:
                 f"--frontend {item!r}: write KEY=VALUE, e.g. vt_match_threshold=0.03"
             )
         try:
-            overrides[key.strip()] = float(value)
+            text = value.strip()
+            overrides[key.strip()] = int(text) if text.lstrip("+-").isdigit() else float(text)
         except ValueError:
             raise ParameterError(f"--frontend {item!r}: {value!r} is not a number") from None
     return overrides

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from app.progress import ProgressBar
+from cogmap_core.datasets.camera_writer import generate_camera_only
 from cogmap_core.datasets.generator import GenerationResult, MazeConfig, generate_maze_bag
 from cogmap_core.datasets.layout import DEFAULT_LAYOUT, builtin_layouts
 from cogmap_core.datasets.motion import OdometryModel
@@ -49,8 +50,34 @@ def describe(result: GenerationResult) -> str:
     return "\n".join(lines)
 
 
+def _make_camera_only(args: argparse.Namespace, config: MazeConfig) -> int:
+    bar = None if args.quiet else ProgressBar("cogmap make-maze")
+
+    def progress(done: int, total: int) -> None:
+        if bar is not None:
+            bar(done, total, done / config.fps)
+
+    try:
+        result = generate_camera_only(
+            args.out, config, overwrite=args.force, workers=args.workers, progress=progress
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    minutes, seconds = divmod(result.duration, 60.0)
+    print(
+        f"wrote {result.path} (camera only: {result.frames} frames, {int(minutes)} min "
+        f"{seconds:.0f} s) in {result.elapsed:.1f} s"
+    )
+    for path in result.files[1:]:
+        print(f"  {path}")
+    return 0
+
+
 def _make_maze(args: argparse.Namespace) -> int:
     config = config_from_args(args)
+    if args.camera_only:
+        return _make_camera_only(args, config)
     bar = None if args.quiet else ProgressBar("cogmap make-maze")
     fps = config.fps
 
@@ -85,7 +112,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "the iRat 2011 Australia topics (camera JPEGs, wheel odometry, overhead ground truth). "
         f"Built-in layouts: {', '.join(builtin_layouts())}.",
     )
-    parser.add_argument("out", metavar="OUT.bag", help="bag file to write")
+    parser.add_argument(
+        "out",
+        metavar="OUT.bag",
+        help="bag file to write (with --camera-only: OUT.mp4 / OUT.avi, or an image folder)",
+    )
+    parser.add_argument(
+        "--camera-only",
+        action="store_true",
+        help="write the camera alone: a video (OUT.mp4, OUT.avi) or a folder of JPEG images "
+        "(any other name), with its frame times, ground truth and front-end profile beside it; "
+        "cogmap run maps it with RatSLAM's visual odometry",
+    )
     parser.add_argument(
         "--layout",
         default=DEFAULT_LAYOUT,

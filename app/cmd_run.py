@@ -15,6 +15,7 @@ from app.cli_common import (
     add_input_arguments,
     add_map_arguments,
     add_topic_arguments,
+    camera_options_from_args,
     frontend_from_args,
     input_kind,
     log_options_from_args,
@@ -47,6 +48,7 @@ def _run(args: argparse.Namespace) -> int:
         param_changes=changes,
         save_session=None if args.save_session is None else Path(args.save_session),
         save_events=None if args.save_events is None else Path(args.save_events),
+        camera=camera_options_from_args(args),
     )
     bar = ProgressBar("cogmap run")
 

@@ -16,6 +16,7 @@ from app.cli_common import (
     add_input_arguments,
     add_map_arguments,
     add_topic_arguments,
+    camera_options_from_args,
     frontend_from_args,
     input_kind,
     log_options_from_args,
@@ -122,7 +123,7 @@ def _serve(args: argparse.Namespace) -> int:
             raise InputFileError(
                 f"{bag_path}: no such bag; --resume continues on an existing .bag file"
             )
-        resume = resume_session(args.resume, frontend_from_args(args, bag_path), 4, changes)
+        resume = resume_session(args.resume, frontend_from_args(args, bag_path), 1, changes)
         print(f"cogmap serve: resuming {args.resume}: {describe(*resume)}", file=sys.stderr)
     from app.server.access import guarded_server, is_loopback, policy_for
     from app.server.app import CogmapApp
@@ -156,6 +157,13 @@ def _serve(args: argparse.Namespace) -> int:
         resume=resume,
         export_dir=export_dir,
         data_dirs=data_dirs,
+        # (the visual odometry of a named camera input takes the --frontend overrides too)
+        camera=camera_options_from_args(
+            args,
+            frontend_from_args(args, Path(args.bag))
+            if args.bag is not None and kind.has_camera
+            else None,
+        ),
     )
     folders = ", ".join(str(d) for d in data_dirs)
     print(

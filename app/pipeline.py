@@ -25,6 +25,7 @@ from app.report import ReportFolder
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import BagReader, BagTopics
+from cogmap_core.datasets.camera_common import CameraReader
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError
 from cogmap_core.evaluation import (
@@ -43,6 +44,7 @@ from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, optimisation_summary
 from cogmap_core.sources.detect import (
     KINDS,
+    CameraOptions,
     LogOptions,
     Source,
     check_sessions_allowed,
@@ -89,12 +91,14 @@ class RunOptions:
             only).
         save_events: write the map events of the run (the front end's, or a log's) to this
             event file at the end of the data, as ``cogmap sweep`` records and reads them.
+        camera: a camera input's motion (a bag's odometry topic or visual odometry) and the
+            frame rate of a video or image folder without a times file.
 
     """
 
     frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
     topics: BagTopics | None = None
-    image_scale: int = 4
+    image_scale: int = 1
     force: bool = False
     format: str | None = None  # bag, tuc, csv; None: detected from the content
     log: LogOptions = field(default_factory=LogOptions)  # how to read a log
@@ -104,6 +108,7 @@ class RunOptions:
     param_changes: Mapping[str, float] = field(default_factory=dict)
     save_session: Path | None = None
     save_events: Path | None = None
+    camera: CameraOptions = field(default_factory=CameraOptions)
 
 
 @dataclass
@@ -311,8 +316,10 @@ def _false_link(
 
 def source_description(reader: Source) -> dict[str, Any]:
     """What the input is and how it was read, for the report."""
-    if isinstance(reader, LogReader):
+    if isinstance(reader, LogReader | CameraReader):
         return reader.description()
+    if isinstance(reader, BagReader) and reader.visual_odometry:
+        return {"format": "bag", "odometry": "visual"}
     return {"format": "bag"}
 
 
@@ -482,6 +489,7 @@ class HeadlessPipeline:
             log=o.log,
             on_clock_jump=o.on_clock_jump,
             on_corrupt="stop" if o.until_error else "error",
+            camera=replace(o.camera, frontend=self.frontend),
         )
 
     def _check_image_size(self, image: np.ndarray) -> None:

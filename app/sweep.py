@@ -85,7 +85,7 @@ except ImportError:  # pragma: no cover - Windows
 
 SWEEP_FORMAT = "cogmap-sweep"
 SWEEP_VERSION = 1
-IMAGE_SCALE = 4  # as cogmap run
+IMAGE_SCALE = 1  # as cogmap run: full size, for OpenRatSLAM's whole-pixel template blocks
 CELL_VERSION = 1  # bump when a cell's figures change meaning: old rows are then not reused
 
 RESULTS_FILE = "results.csv"
@@ -365,8 +365,15 @@ def prepare_events(
     )
 
 
-def cached_bag_events(path: Path, say: Callable[[str], None] | None = None) -> EventRecording:
+def cached_bag_events(
+    path: Path,
+    say: Callable[[str], None] | None = None,
+    frontend_changes: Mapping[str, float] | None = None,
+) -> EventRecording:
     """A bag's front-end events (its profile's settings) from the user-wide cache.
+
+    ``frontend_changes`` alter the profile's settings (e.g.
+    :data:`~cogmap_core.frontend.config.COGMAP_ARITHMETIC`); they are part of the cache key.
 
     The cache sweeps fill (``$COGMAP_CACHE/events``, keyed by the bag's name, size, time and
     the front-end settings); the front end runs once when the bag is not in it. A damaged
@@ -374,7 +381,8 @@ def cached_bag_events(path: Path, say: Callable[[str], None] | None = None) -> E
     """
     from cogmap_core.datasets.profile import frontend_config_for
 
-    source = bag_source(path, frontend_config_for(path), BagTopics())
+    config = frontend_config_for(path).with_changes(**(frontend_changes or {}))
+    source = bag_source(path, config, BagTopics())
     cached = shared_events_dir() / source.events_name
     if cached.exists():
         with contextlib.suppress(InputFileError):

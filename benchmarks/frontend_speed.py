@@ -2,11 +2,11 @@
 
 Usage::
 
-    python benchmarks/frontend_speed.py [--templates 2000] [--scale 4] [--laps 2] [--bag BAG]
+    python benchmarks/frontend_speed.py [--templates 2000] [--scale 1] [--laps 2] [--bag BAG]
 
 Without ``--bag`` a synthetic stream is used: a robot drives laps of a closed circuit whose walls
 are a long panorama of textured segments with landmarks (rendered at 1/``scale`` of the iRat's
-416x240, as the headless pipeline decodes JPEGs at reduced scale), with sensor noise and light
+416x240; the headless pipeline decodes JPEGs at full size), with sensor noise and light
 changes. The first lap is exploration (mostly new templates); the later laps revisit it, with
 loop closures. The circuit is long enough that the first lap stores about ``--templates``
 templates. With ``--bag`` the frames of a bag are used instead (through the dataset reader).
@@ -98,7 +98,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--templates", type=int, default=2000, help="templates after lap 1")
     parser.add_argument("--laps", type=int, default=2)
-    parser.add_argument("--scale", type=int, default=4, choices=(1, 2, 4))
+    parser.add_argument("--scale", type=int, default=1, choices=(1, 2, 4))
     parser.add_argument("--bag", help="use the frames of this bag instead")
     parser.add_argument("--sample", type=int, default=200, help="frames for fast vs exhaustive")
     args = parser.parse_args()

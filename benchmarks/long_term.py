@@ -122,7 +122,7 @@ def timed_pass(bag: Path, lap_times: tuple[float, ...]) -> Run:
     maps = [(mode.value, session.maps[mode]) for mode in MODES]
     clock = time.perf_counter
     laps = len(lap_times) - 1
-    with open_bag(bag, image_scale=4) as reader:
+    with open_bag(bag, image_scale=1) as reader:  # as cogmap run
         frames = reader.frames()
         epoch = reader.start_stamp
         while True:

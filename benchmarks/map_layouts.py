@@ -46,6 +46,7 @@ from cogmap_core.config import MapParams
 from cogmap_core.datasets.cache import DATASET_VERSION, cache_dir, default_dataset_path
 from cogmap_core.datasets.generator import MazeConfig, generate_maze_bag, plan_dataset
 from cogmap_core.event_file import EventRecording
+from cogmap_core.frontend.config import COGMAP_ARITHMETIC
 from cogmap_core.slam import EventLog
 
 LAYOUTS = ("irat_australia", "figure_eight", "long_corridors", "junction_dead_end")
@@ -76,10 +77,12 @@ def bag_for(layout: str, seed: int = 1) -> Path:
     return path
 
 
-def load_dataset(layout: str, seed: int = 1) -> Dataset:
+def load_dataset(
+    layout: str, seed: int = 1, frontend_changes: dict[str, float] | None = None
+) -> Dataset:
     """Bag, lap times and events of one layout and seed (events: the user-wide event cache)."""
     bag = bag_for(layout, seed)
-    recording = cached_bag_events(bag, print)
+    recording = cached_bag_events(bag, print, frontend_changes)
     frontend_s = float(recording.meta.get("frontend_wall_s", float("nan")))
     lap_times = plan_dataset(MazeConfig(layout=layout, seed=seed)).trajectory.lap_times
     return Dataset(layout, seed, bag, lap_times, recording, frontend_s)
@@ -250,12 +253,20 @@ def main() -> None:
     parser.add_argument(
         "--param", action="append", default=[], metavar="NAME=VALUE", help="map parameter"
     )
+    parser.add_argument(
+        "--arithmetic",
+        choices=("openratslam", "cogmap"),
+        default="openratslam",
+        help="the front end's arithmetic: OpenRatSLAM's (default) or cogmap's former own "
+        "(COGMAP_ARITHMETIC: the whole crop, one pose-cell update a frame, ...)",
+    )
     args = parser.parse_args()
+    frontend = dict(COGMAP_ARITHMETIC) if args.arithmetic == "cogmap" else None
     changes = {k: float(v) for k, v in (p.split("=", 1) for p in args.param)}
     params = MapParams().with_changes(**changes)
     seeds = [int(seed) for seed in args.seeds.split(",")]
     results = [
-        evaluate(load_dataset(layout, seed), params, args.radius, args.maps)
+        evaluate(load_dataset(layout, seed, frontend), params, args.radius, args.maps)
         for seed in seeds
         for layout in args.layouts.split(",")
     ]

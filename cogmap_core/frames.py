@@ -23,6 +23,9 @@ class Frame:
         rotation: heading change since the previous frame (rad), from ``twist.angular.z``.
         ground_truth: ``(x, y, theta)`` from ``/overhead/pose`` at this frame's time, or ``None``
             when the bag has no ground truth.
+        odometry_steps: the same motion message by message, ``(k, 2)`` rows of (translation m,
+            rotation rad) in arrival order (what OpenRatSLAM's pose cells take one at a time),
+            or ``None`` when the source only knows the total (then it is one step).
 
     """
 
@@ -32,6 +35,7 @@ class Frame:
     translation: float
     rotation: float
     ground_truth: tuple[float, float, float] | None = None
+    odometry_steps: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True, slots=True)

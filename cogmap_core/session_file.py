@@ -13,7 +13,7 @@ no pickle, read with ``allow_pickle=False``). Member ``header`` is a 0-d unicode
 JSON (as Python writes it; ``NaN`` and ``Infinity`` may occur)::
 
     {"format": "cogmap-session", "version": 1, "cogmap": "0.1.0",
-     "frontend": {...FrontEndConfig...}, "image_scale": 4, "params": {...MapParams...},
+     "frontend": {...FrontEndConfig...}, "image_scale": 1, "params": {...MapParams...},
      "modes": ["standard", ...], "finished": false,
      "epoch": 1322449200.0, "data_time": 825.3, "frames": 14446, "events": 26209,
      "bags": [{"bag": "...", "offset": 0.0, "frames": 14446, "first": 0.01, "last": 825.3}],
@@ -49,6 +49,7 @@ from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.fileio import atomic_writer, load_archive
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
+from cogmap_core.frontend.config import COGMAP_ARITHMETIC
 from cogmap_core.frontend.local_view import MatchResult, ViewMatch
 from cogmap_core.frontend.pose_cells import _ViewCell
 from cogmap_core.map_graph import MapGraph, grow_array
@@ -83,7 +84,7 @@ class SessionMeta:
     """
 
     epoch: float = 0.0
-    image_scale: int = 4
+    image_scale: int = 1
     bags: list[dict[str, Any]] = field(default_factory=list)
 
     def resume_offset(self, bag_start: float, data_time: float) -> float:
@@ -336,7 +337,7 @@ def load_session(
         if frontend is None and image_scale is None:
             return
         try:
-            saved = FrontEndConfig.from_dict(header["frontend"])
+            saved = _frontend_of(header)
             scale = int(header["image_scale"])
         except (KeyError, TypeError, ValueError, OverflowError, ParameterError) as exc:
             raise SessionError(
@@ -376,8 +377,13 @@ def load_session(
         ) from None
 
 
+def _frontend_of(header: Json) -> FrontEndConfig:
+    """The session's front-end settings; a file from before issue 26 used cogmap's arithmetic."""
+    return FrontEndConfig.from_dict({**COGMAP_ARITHMETIC, **header["frontend"]})
+
+
 def _restore(header: Json, arrays: Arrays) -> tuple[SlamSession, SessionMeta]:
-    config = FrontEndConfig.from_dict(header["frontend"])
+    config = _frontend_of(header)
     params = MapParams.from_dict(header["params"])
     modes = tuple(MapMode(m) for m in header["modes"])
     session = SlamSession(params, config, modes)

@@ -211,7 +211,7 @@ def test_cogmap_run_skips_corrupt_jpegs_and_refuses_tiny_images(tmp_path: Path, 
     assert main(["run", str(path), "--out", str(out)]) == 2
     assert one_line_error(capsys.readouterr().err) == (
         f"cogmap run: error: {path}: camera images of about 8x8 px are too small for the 60x20 "
-        "view template; use a camera topic with images of at least 240x128 px"
+        "view template; use a camera topic with images of at least 60x32 px"  # decoded at full size
     )
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == [
         "cj.bag",

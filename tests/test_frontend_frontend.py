@@ -12,10 +12,21 @@ from cogmap_core.errors import InputFileError
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
 from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
+from cogmap_core.frontend.config import COGMAP_ARITHMETIC
 
 CELL = 0.015
+# Most tests here follow one frame's action in that frame's events: cogmap's former order (one
+# pose-cell update per frame, decided at once). OpenRatSLAM's order (the default) is tested at
+# the end: the same decisions, one frame later.
 CONFIG = FrontEndConfig(
-    reference_image_width=420, image_crop_x_max=420, image_crop_y_max=140, camera_hfov_deg=60.0
+    reference_image_width=420,
+    image_crop_x_max=420,
+    image_crop_y_max=140,
+    camera_hfov_deg=60.0,
+    **COGMAP_ARITHMETIC,
+)
+ORS = CONFIG.with_changes(
+    vt_whole_crop=0, vt_mean_skip=1, pc_update_per_odometry=1, pc_inject_nearest=0, pc_edge_loss=1
 )
 
 
@@ -206,3 +217,43 @@ def test_time_going_backwards_is_rejected() -> None:
     fe.process(Frame(0, 2.0, place(0), 0.0, 0.0))
     with pytest.raises(InputFileError, match="backwards"):
         fe.process(Frame(1, 1.0, place(0), 0.0, 0.0))
+
+
+# ------------------------------------------------------------------ OpenRatSLAM's order
+def test_openratslam_order_decides_at_the_first_odometry_after_a_frame() -> None:
+    fe = FrontEnd(ORS)
+    steps = np.array([[0.004, 0.0], [0.005, 0.01], [0.006, 0.02]])
+    first = fe.process(Frame(0, 0.0, place(0), 0.0, 0.0, odometry_steps=np.zeros((0, 2))))
+    assert first == [Odometry(0.0, 0.0, 0.0)]  # the view is in, nothing decided yet
+    assert fe.vertex_count == 0 and fe.current_template == 0
+    events = fe.process(Frame(1, 0.1, place(1), 0.015, 0.03, odometry_steps=steps))
+    # Frame 0's experience at the first message, then the rest of the motion.
+    assert events == [
+        Odometry(0.1, 0.004, 0.0),
+        CreateVertex(0.1, 0, 0),
+        Odometry(0.1, pytest.approx(0.011), pytest.approx(0.03)),
+    ]
+    assert fe.current_template == 1 and fe.vertex_count == 1
+    events = fe.process(Frame(2, 0.2, place(2), 0.01, 0.0))  # no steps given: one step
+    assert events == [Odometry(0.2, 0.01, 0.0), CreateVertex(0.2, 1, 1)]
+
+
+def test_both_orders_take_the_same_decisions_one_frame_apart() -> None:
+    """Frames with one odometry message each: OpenRatSLAM's order decides frame k's action at
+    frame k + 1 with the pose cells moved by frame k + 1's message first."""
+    ors, former = FrontEnd(ORS), FrontEnd(ORS.with_changes(pc_update_per_odometry=0))
+    ors.decisions, former.decisions = [], []
+    for i in range(40):
+        image = place(i % 9)
+        frame = Frame(i, i * 0.1, image, 0.01, 0.05, odometry_steps=np.array([[0.01, 0.05]]))
+        ors.process(frame)
+        former.process(frame)
+    assert 10 < len(ors.decisions) <= len(former.decisions)
+    assert [d[0] for d in ors.decisions] == [d[0] for d in former.decisions][: len(ors.decisions)]
+
+
+def test_a_bad_odometry_step_is_rejected() -> None:
+    fe = FrontEnd(ORS)
+    steps = np.array([[0.01, 0.0], [float("nan"), 0.0]])
+    with pytest.raises(InputFileError, match="odometry step"):
+        fe.process(Frame(0, 0.0, place(0), 0.01, 0.0, odometry_steps=steps))

@@ -10,11 +10,17 @@ import pytest
 
 from cogmap_core.errors import InputFileError
 from cogmap_core.frontend import FrontEndConfig, LocalViewCells
+from cogmap_core.frontend.config import COGMAP_ARITHMETIC
+from cogmap_core.frontend.local_view import VALUE_SCALE
+
+# The 8-bit whole-crop templates (cogmap's former arithmetic, a named setting); the tests of
+# OpenRatSLAM's whole-pixel blocks (the default) are at the end.
+WHOLE = FrontEndConfig(**COGMAP_ARITHMETIC)
 
 # A reference image 420 px wide with the crop rows 0-140: every template pixel is exactly one
 # 7x7 block of the image, so an image built from 7x7 blocks gives a known template.
 BLOCK = 7
-EXACT = FrontEndConfig(
+EXACT = WHOLE.with_changes(
     reference_image_width=420,
     image_crop_x_max=420,
     image_crop_y_max=140,
@@ -40,7 +46,7 @@ def view_image(panorama: np.ndarray, start: int) -> np.ndarray:
 
 
 def test_template_is_the_area_mean_of_the_crop() -> None:
-    lv = LocalViewCells(FrontEndConfig())
+    lv = LocalViewCells(WHOLE)
     rng = np.random.default_rng(1)
     image = cv2.GaussianBlur((rng.random((240, 416)) * 255).astype(np.uint8), (0, 0), 2)
     template = lv.make_template(image)
@@ -55,7 +61,7 @@ def test_template_is_the_area_mean_of_the_crop() -> None:
 
 @pytest.mark.parametrize("scale", [2, 4])
 def test_reduced_images_give_nearly_the_same_template(scale: int) -> None:
-    lv = LocalViewCells(FrontEndConfig())
+    lv = LocalViewCells(WHOLE)
     rng = np.random.default_rng(2)
     image = cv2.GaussianBlur((rng.random((240, 416)) * 255).astype(np.uint8), (0, 0), 6)
     small = cv2.resize(image, (416 // scale, 240 // scale), interpolation=cv2.INTER_AREA)
@@ -72,7 +78,7 @@ def test_exact_block_images_give_the_block_template() -> None:
 
 
 def test_bad_images_are_rejected() -> None:
-    lv = LocalViewCells(FrontEndConfig())
+    lv = LocalViewCells(WHOLE)
     with pytest.raises(InputFileError):
         lv.make_template(np.zeros((240, 416, 3), dtype=np.uint8))
     with pytest.raises(InputFileError):
@@ -108,7 +114,7 @@ def test_shift_beyond_the_search_range_makes_a_new_template() -> None:
 
 
 def test_threshold_is_inclusive_and_exact() -> None:
-    lv = LocalViewCells(FrontEndConfig())
+    lv = LocalViewCells(WHOLE)
     flat = np.full((20, 60), 100, dtype=np.uint8)
     lv.add(flat)
     # The compared window is 52 x 20 = 1040 pixels; the threshold is 0.03 * 1040 * 255 = 7956.
@@ -126,7 +132,7 @@ def test_threshold_is_inclusive_and_exact() -> None:
 
 
 def test_ties_break_by_lowest_template_then_lowest_offset() -> None:
-    lv = LocalViewCells(FrontEndConfig())
+    lv = LocalViewCells(WHOLE)
     flat = np.full((20, 60), 90, dtype=np.uint8)
     pano = strip(7)
     lv.add(pano[:, 0:60])
@@ -152,7 +158,7 @@ def _families(rng: np.random.Generator, count: int) -> list[np.ndarray]:
 
 def test_fast_matcher_equals_exhaustive_search() -> None:
     rng = np.random.default_rng(8)
-    lv = LocalViewCells(FrontEndConfig())
+    lv = LocalViewCells(WHOLE)
     stored = _families(rng, 400)
     for t in stored[:150]:
         lv.add(t)
@@ -187,7 +193,7 @@ def test_level0_key_follows_the_data_and_stays_exact() -> None:
         return np.clip(np.rint(t * (100.0 / t.mean())), 0, 255).astype(np.uint8)
 
     stored = [normalised(t.astype(float)) for t in _families(rng, 300)]
-    lv = LocalViewCells(FrontEndConfig())
+    lv = LocalViewCells(WHOLE)
     for t in stored:
         lv.add(t)
     assert lv._indexed > 0
@@ -239,3 +245,100 @@ def test_patch_normalisation_is_local_contrast() -> None:
             first = t
         else:
             assert np.array_equal(t, first)  # independent of brightness and contrast
+
+
+# ----------------------------------------------------------------- OpenRatSLAM's arithmetic
+def test_template_is_openratslams_whole_pixel_block_means() -> None:
+    """iRat geometry: 416/60 -> 6 by 150/20 -> 7 pixel blocks over columns 0-359, rows 0-139."""
+    lv = LocalViewCells(FrontEndConfig())
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 256, (240, 416), dtype=np.uint8)
+    template = lv.make_template(image)
+    assert template.shape == (20, 60) and template.dtype == np.int32
+    sums = image[:140, :360].astype(np.int64).reshape(20, 7, 60, 6).sum(axis=(1, 3))
+    assert np.array_equal(template, np.rint(sums / 255.0 / 42 * VALUE_SCALE).astype(np.int32))
+    changed = image.copy()
+    changed[140:, :] = 0  # rows past the last whole block
+    changed[:, 360:] = 255  # columns past it
+    assert np.array_equal(lv.make_template(changed), template)
+
+
+def test_block_normalisation_is_openratslams() -> None:
+    lv = LocalViewCells(FrontEndConfig(vt_normalisation=0.4))
+    image = np.full((240, 416), 50, dtype=np.uint8)
+    image[:7, :6] = 200  # one brighter block
+    view = np.full((20, 60), 50 / 255.0)
+    view[0, 0] = 200 / 255.0
+    expected = np.clip(view * 0.4 / (view.sum() / view.size), 0.0, 1.0)
+    assert np.array_equal(lv.make_template(image), np.rint(expected * VALUE_SCALE))
+
+
+def test_block_threshold_is_inclusive_at_full_precision() -> None:
+    lv = LocalViewCells(FrontEndConfig(vt_mean_skip=0))
+    flat = np.full((20, 60), 400_000, dtype=np.int32)
+    lv.add(flat)
+    # 0.03 * 1040 pixels * 2^20 = 32715571.2: the largest SAD that matches is 32715571.
+    assert lv.max_sad == 32_715_571
+    view = flat.copy()
+    view[:, 4:56] += 31_457  # SAD 32715280
+    view[0, 4] += 291  # SAD 32715571
+    assert lv.match(view).sad == 32_715_571
+    view[0, 5] += 1
+    assert not lv.match(view).matched and not lv.match_exhaustive(view).matched
+
+
+def test_mean_skip_leaves_out_templates_of_another_mean() -> None:
+    """OpenRatSLAM skips a template whose mean is more than threshold + 0.005 off, even when
+    the compared columns match: the edge columns count in the mean, not in the comparison."""
+    q = VALUE_SCALE // 100
+    template = np.full((20, 60), 50 * q, dtype=np.int32)
+    view = template.copy()
+    view[:, :4] += 30 * q  # 8 of 60 columns 0.3 brighter: mean 0.04 higher
+    view[:, 56:] += 30 * q
+    for skip, matched in ((1, False), (0, True)):
+        lv = LocalViewCells(FrontEndConfig(vt_mean_skip=skip))
+        lv.add(template)
+        assert lv.match(view).matched is matched
+        assert lv.match(view, hint=0).matched is matched
+        assert lv.match_exhaustive(view).matched is matched
+    view[:, 56:] -= 30 * q  # mean 0.02 higher: within 0.035
+    lv = LocalViewCells(FrontEndConfig())
+    lv.add(template)
+    assert lv.match(view).sad == 0
+
+
+def test_block_fast_matcher_equals_exhaustive_search() -> None:
+    rng = np.random.default_rng(9)
+    lv = LocalViewCells(FrontEndConfig())
+    scale = VALUE_SCALE // 255
+
+    def fixed(t: np.ndarray) -> np.ndarray:
+        noise = rng.integers(0, scale, t.shape)
+        return (t.astype(np.int64) * scale + noise).astype(np.int32)
+
+    stored = [fixed(t) for t in _families(rng, 300)]
+    for t in stored:
+        lv.add(t)
+    assert lv._indexed > 0 and lv._desc1.dtype == np.float64  # sums past 2^24: exact in float64
+    matched = 0
+    unrelated = [fixed(strip(600 + i, contrast=0.3 + 0.01 * i)[:, :60]) for i in range(30)]
+    queries = [fixed(t) for t in _families(rng, 150)] + stored[::23] + unrelated
+    for q in queries:
+        fast, slow = lv.match(q, int(rng.integers(lv.count))), lv.match_exhaustive(q)
+        assert (fast.template_id, fast.offset, fast.sad) == (
+            slow.template_id,
+            slow.offset,
+            slow.sad,
+        )
+        matched += fast.matched
+    assert 20 < matched <= len(queries) - 20  # both outcomes are exercised
+
+
+def test_block_templates_need_a_whole_pixel_per_template_pixel() -> None:
+    lv = LocalViewCells(FrontEndConfig())
+    with pytest.raises(InputFileError, match="too small"):
+        lv.make_template(np.zeros((30, 52), dtype=np.uint8))  # a JPEG decoded at 1/8
+    with pytest.raises(ValueError, match="int32"):
+        lv.add(np.zeros((20, 60), dtype=np.uint8))
+    with pytest.raises(ValueError, match="values"):
+        lv.add(np.full((20, 60), VALUE_SCALE + 1, dtype=np.int32))

@@ -73,7 +73,7 @@ def report(maze_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
 def reference(maze_bag: Path) -> SlamSession:
     """The same run computed in-process, independently of the command."""
     session = SlamSession(frontend_config=frontend_config_for(maze_bag))
-    with open_bag(maze_bag, image_scale=4) as reader:
+    with open_bag(maze_bag, image_scale=1) as reader:
         session.run(reader.frames())
     return session
 
@@ -212,7 +212,7 @@ def test_saved_events_are_the_front_ends(
     assert saved.source == str(maze_bag)
     assert saved.frontend == frontend_config_for(maze_bag).to_dict()
     assert (saved.meta["image_scale"], saved.meta["topics"]["image"]) == (
-        4,
+        1,  # full size: OpenRatSLAM's whole-pixel template blocks
         "/irat_red/camera/image/compressed",
     )
     assert json.loads((out / "summary.json").read_text())["frames"] == frames

@@ -128,7 +128,10 @@ def test_bad_arguments_fail_fast_with_one_line(capsys: pytest.CaptureFixture[str
     # a missing log with its ground truth named: refused now, not silently served without it
     assert main(["serve", "missing_odometry.csv", "--ground-truth", "gt.csv"]) == 2
     err = capsys.readouterr().err.strip()
-    expected = "missing_odometry.csv: no such file; give a bag, a TUC log or a CSV log"
+    expected = (
+        "missing_odometry.csv: no such file; give a bag, a video, a folder of images, a TUC log "
+        "or a CSV log"
+    )
     assert err == f"cogmap serve: error: {expected}"
     # --resume continues on a bag: a missing one is refused, worded without "or omit BAG"
     assert main(["serve", "missing.bag", "--resume", "s.npz"]) == 2

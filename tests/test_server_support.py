@@ -41,7 +41,7 @@ def short_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def reference(short_bag: Path) -> SlamSession:
     session = SlamSession(frontend_config=frontend_config_for(short_bag))  # as cogmap run
-    with open_bag(short_bag, image_scale=4) as reader:
+    with open_bag(short_bag, image_scale=1) as reader:
         session.run(reader.frames())
     return session
 

@@ -88,7 +88,7 @@ from cogmap_core.event_file import KIND_LINK
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, EventLog, SlamSession
-from cogmap_core.sources.detect import KINDS, LogOptions, Source
+from cogmap_core.sources.detect import KINDS, CameraOptions, LogOptions, Source
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -194,7 +194,7 @@ class CogmapApp:
         autoplay: bool = True,
         static_dir: Path | None = None,
         scene_hz: float = 10.0,
-        image_scale: int = 4,
+        image_scale: int = 1,
         topics: BagTopics | None = None,
         rebuild_workers: int = 2,
         wait_for_viewer: bool = False,
@@ -204,8 +204,10 @@ class CogmapApp:
         resume: tuple[SlamSession, SessionMeta] | None = None,
         export_dir: Path | None = None,
         data_dirs: Sequence[Path] | None = None,
+        camera: CameraOptions | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
+        self._camera = camera  # a camera input's odometry and frame rate (issue 26)
         self.defaults = defaults or MapParams()
         self.exports = ExportFolder(export_dir if export_dir is not None else default_export_dir())
         if data_dirs is None:
@@ -298,6 +300,7 @@ class CogmapApp:
             resume=resume,
             lock=self._replay_lock,
             opened=opened,
+            camera=self._camera,
         )
 
     def _reset_label(self) -> str:

@@ -54,6 +54,7 @@ from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, SlamSession
 from cogmap_core.sources.detect import (
     KINDS,
+    CameraOptions,
     LogOptions,
     Source,
     check_sessions_allowed,
@@ -204,7 +205,7 @@ class Replay:
         listener: ReplayListener,
         params: MapParams | None = None,
         frontend: FrontEndSource = None,
-        image_scale: int = 4,
+        image_scale: int = 1,
         speed: float = 1.0,
         autoplay: bool = True,
         priority: tuple[MapMode, ...] = (MapMode.COMPACT,),
@@ -215,6 +216,7 @@ class Replay:
         resume: tuple[SlamSession, SessionMeta] | None = None,
         lock: threading.RLock | None = None,
         opened: Source | None = None,
+        camera: CameraOptions | None = None,
     ) -> None:
         """Set up the replay (nothing is read until :meth:`start`).
 
@@ -226,6 +228,7 @@ class Replay:
         self.bag_source = bag
         self.format = fmt
         self.log_options = log or LogOptions()
+        self.camera_options = camera  # a camera input's odometry and frame rate (issue 26)
         self.has_camera = True  # known once the input is open
         self.listener = listener
         self.frontend_source = frontend
@@ -522,6 +525,7 @@ class Replay:
                     topics=self.topics,
                     image_scale=self.image_scale,
                     log=self.log_options,
+                    camera=self.camera_options,
                 )
             self.has_camera = KINDS[fmt].has_camera
             if self.session.log.frames == 0:  # the front end is chosen for the input

@@ -38,6 +38,11 @@ summarised by :attr:`BagReader.warnings`:
 - ground truth NaN/inf or going backwards: skipped; a ground-truth topic that is not a pose type:
   read without ground truth, with a warning (:attr:`BagReader.open_warnings`).
 
+Camera only: with ``odometry="visual"``, or ``"auto"`` (the default) on a bag without the
+odometry topic, the odometry topic is not read and each frame's motion comes from the camera,
+as RatSLAM's visual odometry computes it (:mod:`cogmap_core.frontend.visual_odometry`, with the
+front end's settings).
+
 Errors (:class:`BagError` and subclasses, one line each): missing file, not a bag, truncated,
 unindexed or corrupt bag, missing camera or odometry topic (listing the topics present), wrong
 camera or odometry message type, a bag none of whose images decode. A bag that turns out corrupt
@@ -75,8 +80,17 @@ from cogmap_core.datasets.topics import (
 )
 from cogmap_core.errors import ParameterError
 from cogmap_core.frames import Frame
+from cogmap_core.frontend.config import FrontEndConfig
+from cogmap_core.frontend.visual_odometry import with_visual_odometry
 
 log = logging.getLogger(__name__)
+
+#: Where a bag's motion comes from: its odometry topic, the camera, or the topic when present.
+ODOMETRY_SOURCES = ("auto", "wheel", "visual")
+
+#: A decoded frame waiting for its ground truth: time, image, translation, rotation and the
+#: odometry steps (one row per message).
+_FrameData = tuple[float, NDArray[np.uint8], float, float, NDArray[np.float64]]
 
 _DECODE_FLAGS = {
     1: cv2.IMREAD_GRAYSCALE,
@@ -356,8 +370,18 @@ class BagReader:
         max_odometry_gap: float = 1.0,
         on_clock_jump: str = "drop",
         on_corrupt: str = "error",
+        odometry: str = "auto",
+        frontend: FrontEndConfig | None = None,
     ) -> None:
         """Open and check the bag; see :func:`open_bag`."""
+        if odometry not in ODOMETRY_SOURCES:
+            raise ParameterError(
+                f"odometry {odometry!r} is not one of {', '.join(ODOMETRY_SOURCES)}"
+            )
+        self.odometry = odometry
+        self.frontend = frontend
+        #: whether the frames' motion comes from the camera (decided when the bag is checked)
+        self.visual_odometry = odometry == "visual"
         self._tmpdir: Path | None = None
         self._reader: AnyReader | None = None
         topics = topics or BagTopics()
@@ -462,7 +486,12 @@ class BagReader:
                 )
 
         need(self.topics.image, IMAGE_TYPE, "camera")
-        need(self.topics.odometry, ODOMETRY_TYPE, "odometry")
+        if self.odometry == "wheel" or (
+            self.odometry == "auto" and self.topics.odometry in all_topics
+        ):
+            need(self.topics.odometry, ODOMETRY_TYPE, "odometry")
+        else:
+            self.visual_odometry = True
         gt_topic = self.topics.ground_truth
         gt_type: str | None = None
         if gt_topic is not None and gt_topic in all_topics:
@@ -485,7 +514,8 @@ class BagReader:
         self._gt_type = gt_type
         # at equal record times rosbags yields messages in this order: odometry, ground truth,
         # then the image, so odometry stamped at a frame's time belongs to that frame
-        self._used = [self.topics.odometry, *([gt_topic] if gt_type else []), self.topics.image]
+        wheel = [] if self.visual_odometry else [self.topics.odometry]
+        self._used = [*wheel, *([gt_topic] if gt_type else []), self.topics.image]
         self._t0_ns = self._first_stamp_ns()
         self._handle_clock_jumps()
         return BagInfo(
@@ -591,6 +621,8 @@ class BagReader:
             )
         if self._iterating:
             raise BagError(f"bag {self.path} is already being read; finish that pass first")
+        if self.visual_odometry:
+            return with_visual_odometry(self._frames(start_time), self.frontend)
         return self._frames(start_time)
 
     def _frames(self, start_time: float) -> Iterator[Frame]:
@@ -617,22 +649,29 @@ class BagReader:
         odom_prev: int | None = None
         backwards_run = 0
         trans = rot = 0.0
+        steps: list[tuple[float, float]] = []  # the same, message by message
         last_image_ns: int | None = None
         shape: tuple[int, ...] | None = None
         gt_prev: tuple[float, float, float, float] | None = None
-        pending: deque[tuple[float, NDArray[np.uint8], float, float]] = deque()
+        pending: deque[_FrameData] = deque()
         images_seen = images_decoded = 0
         largest: tuple[int, int] | None = None  # the first oversized image's declared size
         index = 0
         now = 0.0
 
-        def release(frame_data: tuple[float, NDArray[np.uint8], float, float], pose: Any) -> Frame:
+        def release(frame_data: _FrameData, pose: Any) -> Frame:
             nonlocal index
-            t, image, tr, ro = frame_data
+            t, image, tr, ro, odometry_steps = frame_data
             if pose is None and gt_topic is not None:
                 counters.note("frames_without_ground_truth", t)
             frame = Frame(
-                index=index, time=t, image=image, translation=tr, rotation=ro, ground_truth=pose
+                index=index,
+                time=t,
+                image=image,
+                translation=tr,
+                rotation=ro,
+                ground_truth=pose,
+                odometry_steps=odometry_steps,
             )
             index += 1
             counters.frames += 1
@@ -692,10 +731,12 @@ class BagReader:
                     dt = dt_ns / 1e9
                     trans += v * dt
                     rot += w * dt
+                    steps.append((v * dt, w * dt))
 
                 elif topic == image_topic:
                     if stamp < start_ns:  # before the requested start: consume, do not decode
                         trans = rot = 0.0
+                        steps = []
                         last_image_ns = stamp
                         continue
                     images_seen += 1
@@ -722,8 +763,9 @@ class BagReader:
                         counters.note("image_size_changes", now)
                         continue
                     last_image_ns = stamp
-                    frame_data = (now, image, trans, rot)
+                    frame_data = (now, image, trans, rot, np.array(steps).reshape(-1, 2))
                     trans = rot = 0.0
+                    steps = []
                     if gt_topic is None:
                         yield release(frame_data, None)
                     else:
@@ -810,6 +852,8 @@ def open_bag(
     max_odometry_gap: float = 1.0,
     on_clock_jump: str = "drop",
     on_corrupt: str = "error",
+    odometry: str = "auto",
+    frontend: FrontEndConfig | None = None,
 ) -> BagReader:
     """Open an iRat-layout bag for streaming.
 
@@ -823,6 +867,9 @@ def open_bag(
             (default) or ``"stop"`` reading at the first jump (see the module docstring).
         on_corrupt: ``"error"`` (default): damaged data part-way raises :class:`BagError`;
             ``"stop"``: the pass ends there, keeping the frames read so far (counted).
+        odometry: ``"wheel"`` (the odometry topic, required), ``"visual"`` (the camera's) or
+            ``"auto"`` (the topic when the bag has it, else the camera's).
+        frontend: the visual odometry's settings (default: the iRat defaults).
 
     Raises:
         BagError: missing file, not a bag, truncated / unindexed / corrupt bag.
@@ -838,4 +885,6 @@ def open_bag(
         max_odometry_gap=max_odometry_gap,
         on_clock_jump=on_clock_jump,
         on_corrupt=on_corrupt,
+        odometry=odometry,
+        frontend=frontend,
     )

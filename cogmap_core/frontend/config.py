@@ -47,6 +47,34 @@ _RANGES: dict[str, tuple[float, bool, float, bool, bool, str]] = {
     "vt_recent_no_inject": (0, True, 1_000_000, True, True, "newest templates that inject nothing"),
     "pc_cells_to_avg": (0, True, 1000, True, True, "cells each side used to find the peak"),
     "exp_delta_pc_threshold": (0.0, False, 1e6, True, False, "pose-cell distance of a new place"),
+    "vt_whole_crop": (0, True, 1, True, True, "1 = area mean of the whole crop, 0 = OpenRatSLAM"),
+    "vt_mean_skip": (0, True, 1, True, True, "1 = skip templates of another mean (OpenRatSLAM)"),
+    "pc_update_per_odometry": (0, True, 1, True, True, "1 = a pose-cell update per odometry"),
+    "pc_inject_nearest": (0, True, 1, True, True, "1 = inject at the nearest cell, 0 = truncate"),
+    "pc_edge_loss": (0, True, 1, True, True, "1 = OpenRatSLAM's wrap that loses two edge cells"),
+    "vtrans_image_x_min": (0, True, 100_000, True, True, "first column of the speed strip (px)"),
+    "vtrans_image_x_max": (1, True, 100_000, True, True, "end of the speed strip's columns (px)"),
+    "vtrans_image_y_min": (0, True, 100_000, True, True, "first row of the speed strip (px)"),
+    "vtrans_image_y_max": (1, True, 100_000, True, True, "end of the speed strip's rows (px)"),
+    "vrot_image_x_min": (0, True, 100_000, True, True, "first column of the rotation strip (px)"),
+    "vrot_image_x_max": (1, True, 100_000, True, True, "end of the rotation strip's columns (px)"),
+    "vrot_image_y_min": (0, True, 100_000, True, True, "first row of the rotation strip (px)"),
+    "vrot_image_y_max": (1, True, 100_000, True, True, "end of the rotation strip's rows (px)"),
+    "camera_fov_deg": (0.0, False, 360.0, True, False, "camera field of view (deg)"),
+    "camera_hz": (0.0, True, 1000.0, True, False, "camera rate (Hz; 0 = the frame times')"),
+    "vtrans_scaling": (0.0, False, 1e9, True, False, "speed per unit of profile difference"),
+    "vtrans_max": (0.0, False, 1e6, True, False, "largest visual speed (m/s)"),
+}
+
+#: cogmap's own front-end arithmetic before it followed OpenRatSLAM's (issue 26): the area mean
+#: of the whole crop as 8-bit templates, an exact search over every template, one pose-cell
+#: update per camera frame, injection at the nearest cell and none by the 10 newest templates.
+COGMAP_ARITHMETIC: dict[str, int] = {
+    "vt_whole_crop": 1,
+    "vt_mean_skip": 0,
+    "pc_update_per_odometry": 0,
+    "pc_inject_nearest": 1,
+    "pc_edge_loss": 0,
 }
 
 
@@ -97,6 +125,48 @@ class FrontEndConfig:
         pc_cells_to_avg: cells each side of the maximum used to decode the peak (3).
         exp_delta_pc_threshold: pose-cell distance beyond which the place is new (iRat: 2).
 
+    Arithmetic (defaults: OpenRatSLAM's; :data:`COGMAP_ARITHMETIC` gives cogmap's former own):
+
+    Attributes:
+        vt_whole_crop: 0 = OpenRatSLAM's template: the mean of whole-pixel blocks of
+            ``floor(crop width / template_x_size)`` by ``floor(crop height / template_y_size)``
+            pixels of the image as decoded, from the crop's first column and row (iRat's
+            416 x 150 crop: 6 x 7 pixel blocks covering columns 0-359 and rows 0-139), kept at
+            full precision (values in steps of 2^-20). 1 = the exact area mean of the whole crop
+            (any decoded size, e.g. a JPEG decoded at 1/4 scale), rounded to 8 bits.
+        vt_mean_skip: 1 = a template whose mean differs from the view's by more than
+            ``vt_match_threshold + 0.005`` is not compared (OpenRatSLAM's shortcut; it can
+            reject the best match); 0 = every template is compared.
+        pc_update_per_odometry: 1 = the pose cells are updated once per odometry message and
+            the experience-map action is decided at the first odometry message after a camera
+            frame (OpenRatSLAM's nodes); 0 = one update per camera frame with the odometry since
+            the previous frame, and the action decided right away.
+        pc_inject_nearest: 0 = a familiar view injects at its cell coordinates truncated
+            towards zero, and while fewer than 10 templates exist every familiar view injects
+            (OpenRatSLAM's ``vt < size() - 10`` in unsigned arithmetic); 1 = at the nearest
+            cell, never by the ``vt_recent_no_inject`` newest templates.
+        pc_edge_loss: 1 = path integration wraps around as OpenRatSLAM's does: the activity
+            that leaves a layer across an edge by the cell at the start of that edge, moving
+            along one axis only, is dropped (its loops start at 1; the normalisation later
+            rescales the rest); 0 = everything wraps around.
+
+    Visual odometry (camera-only inputs; OpenRatSLAM's ``visual_odometry.cpp`` and its names):
+
+    Attributes:
+        vtrans_image_x_min, vtrans_image_x_max, vtrans_image_y_min, vtrans_image_y_max: the
+            image strip (reference pixels, end exclusive) whose column intensity profile gives
+            the speed: the mean absolute difference to the previous frame's profile at the best
+            shift, times ``vtrans_scaling``, at most ``vtrans_max`` (m/s).
+        vrot_image_x_min, vrot_image_x_max, vrot_image_y_min, vrot_image_y_max: the strip whose
+            profile's best shift (at most 40 columns either way) gives the rotation.
+        camera_fov_deg: horizontal field of view of the whole image (OpenRatSLAM: 50).
+        camera_hz: camera rate that turns a shift per frame into a rate (OpenRatSLAM: 10); 0
+            (the default) takes each frame's own interval, so a shift of ``s`` columns is a turn
+            of ``s * camera_fov_deg / width`` whatever the rate.
+        vtrans_scaling: metres per second per unit of mean profile difference (OpenRatSLAM:
+            100).
+        vtrans_max: largest speed the visual odometry reports (OpenRatSLAM: 20 m/s).
+
     """
 
     reference_image_width: int = 416
@@ -128,6 +198,23 @@ class FrontEndConfig:
     vt_recent_no_inject: int = 10
     pc_cells_to_avg: int = 3
     exp_delta_pc_threshold: float = 2.0
+    vt_whole_crop: int = 0
+    vt_mean_skip: int = 1
+    pc_update_per_odometry: int = 1
+    pc_inject_nearest: int = 0
+    pc_edge_loss: int = 1
+    vtrans_image_x_min: int = 0
+    vtrans_image_x_max: int = 416
+    vtrans_image_y_min: int = 0
+    vtrans_image_y_max: int = 240
+    vrot_image_x_min: int = 0
+    vrot_image_x_max: int = 416
+    vrot_image_y_min: int = 0
+    vrot_image_y_max: int = 240
+    camera_fov_deg: float = 50.0
+    camera_hz: float = 0.0
+    vtrans_scaling: float = 100.0
+    vtrans_max: float = 20.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range and inconsistent combinations."""
@@ -159,6 +246,16 @@ class FrontEndConfig:
                 f"image_crop_y_min={self.image_crop_y_min} is out of range: must be in "
                 f"[0, image_crop_y_max={self.image_crop_y_max})"
             )
+        sizes = (("x", self.reference_image_width), ("y", self.reference_image_height))
+        for strip in ("vtrans", "vrot"):
+            for axis, size in sizes:
+                low = getattr(self, f"{strip}_image_{axis}_min")
+                high = getattr(self, f"{strip}_image_{axis}_max")
+                if not low < high <= size:
+                    fail(
+                        f"{strip}_image_{axis}_min={low}, {strip}_image_{axis}_max={high} are out "
+                        f"of range: need 0 <= min < max <= {size} (the reference image)"
+                    )
         if 2 * self.vt_shift_match >= self.template_x_size:
             fail(
                 f"vt_shift_match={self.vt_shift_match} is out of range: must be in "

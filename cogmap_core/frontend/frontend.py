@@ -1,9 +1,14 @@
 """The SLAM front end: camera frames and odometry in, cognitive-map events out.
 
-Per frame, in OpenRatSLAM's order: the local view cells match the image (or store a new
-template), the view cell injects energy into the pose cells, the odometry moves the pose cell
-activity, and the pose cells' ``get_action`` decides the experience-map action. The action becomes
-events of :mod:`cogmap_core.events`:
+In OpenRatSLAM's order (``pc_update_per_odometry = 1``, the default): each odometry message that
+arrived before the frame updates the pose cells (attractor dynamics, then path integration) and
+asks ``get_action``, which acts only at the first message after a view; then the local view cells
+match the frame's image (or store a new template) and the view cell injects energy. So a frame's
+action is decided at the first odometry message after it, as OpenRatSLAM's ROS nodes do when
+fed a bag, and its events come out with the next frame (none after the last frame). With
+``pc_update_per_odometry = 0`` (cogmap's former order): the view, one pose-cell update with all
+the frame's odometry, then ``get_action`` at once. The action becomes events of
+:mod:`cogmap_core.events`:
 
 - ``CREATE_NODE`` -> :class:`~cogmap_core.events.CreateVertex` (the next experience id);
 - ``CREATE_EDGE`` -> :class:`~cogmap_core.events.LinkToVertex` then
@@ -11,7 +16,8 @@ events of :mod:`cogmap_core.events`:
   map does: create the link, then set the experience), both with the view's relative angle;
 - ``SET_NODE`` -> :class:`~cogmap_core.events.SetCurrentVertex`.
 
-Every frame first yields an :class:`~cogmap_core.events.Odometry` event for its motion. Nothing
+Every frame first yields an :class:`~cogmap_core.events.Odometry` event for its motion (in
+OpenRatSLAM's order: for the motion up to the action, and another for the rest after it). Nothing
 depends on wall-clock time; ground truth in the frames is never read.
 """
 
@@ -27,7 +33,7 @@ from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, S
 from cogmap_core.frames import Frame
 from cogmap_core.frontend.config import FrontEndConfig
 from cogmap_core.frontend.local_view import LocalViewCells, ViewMatch
-from cogmap_core.frontend.pose_cells import ActionKind, PoseCellExperiences
+from cogmap_core.frontend.pose_cells import Action, ActionKind, PoseCellExperiences
 
 
 class FrontEnd:
@@ -41,6 +47,9 @@ class FrontEnd:
         self.last_view: ViewMatch | None = None
         self.frames = 0
         self._last_time = -math.inf
+        #: When a list: each action taken is appended as ``(frame, action, peak, experiences)``
+        #: with ``frame`` the index of the view it was decided for (benchmarks compare these).
+        self.decisions: list[tuple[int, Action, tuple[float, float, float], int]] | None = None
 
     def process(self, frame: Frame) -> list[MapEvent]:
         """Process one frame; return its events (``Odometry`` first), all at ``frame.time``."""
@@ -58,6 +67,8 @@ class FrontEnd:
                 f"(translation {frame.translation!r}, rotation {frame.rotation!r})"
             )
         self._last_time = time
+        if self.config.pc_update_per_odometry:
+            return self._process_per_odometry(frame, time, translation, rotation)
         hint = self.last_view.template_id if self.last_view is not None else None
         view = self.local_view.observe(frame.image, hint)
         self.last_view = view
@@ -67,14 +78,54 @@ class FrontEnd:
         action = pc.get_action()
         self.frames += 1
         events: list[MapEvent] = [Odometry(time, translation, rotation)]
+        self._action_events(action, time, events)
+        return events
+
+    def _process_per_odometry(
+        self, frame: Frame, time: float, translation: float, rotation: float
+    ) -> list[MapEvent]:
+        """OpenRatSLAM's order: the odometry messages before the frame, then its view."""
+        steps = frame.odometry_steps
+        if steps is None:
+            pairs: list[tuple[float, float]] = [(translation, rotation)]
+        else:
+            pairs = [(float(t), float(r)) for t, r in np.asarray(steps, dtype=np.float64)]
+            if not all(math.isfinite(t) and math.isfinite(r) for t, r in pairs):
+                raise InputFileError(f"frame {frame.index}: an odometry step is not finite")
+        pc = self.pose_cells
+        events: list[MapEvent] = []
+        moved_t = moved_r = 0.0
+        for step_t, step_r in pairs:
+            pc.on_odo(step_t, step_r)
+            moved_t += step_t
+            moved_r += step_r
+            action = pc.get_action()
+            if action.kind is not ActionKind.NO_ACTION:
+                events.append(Odometry(time, moved_t, moved_r))
+                moved_t = moved_r = 0.0
+                self._action_events(action, time, events)
+        if moved_t or moved_r or not events:
+            events.append(Odometry(time, moved_t, moved_r))
+        hint = self.last_view.template_id if self.last_view is not None else None
+        view = self.local_view.observe(frame.image, hint)
+        self.last_view = view
+        pc.on_view_template(view.template_id, view.relative_rad)
+        self.frames += 1
+        return events
+
+    def _action_events(self, action: Action, time: float, events: list[MapEvent]) -> None:
+        """Append the map events of a pose-cell action (the module doc's table)."""
+        if self.decisions is not None and action.kind is not ActionKind.NO_ACTION:
+            pc = self.pose_cells
+            self.decisions.append((self.frames - 1, action, pc.network.best, pc.experience_count))
         if action.kind is ActionKind.CREATE_NODE:
-            events.append(CreateVertex(time, action.dest, view.template_id))
+            vt = self.pose_cells.experience_view(action.dest)
+            events.append(CreateVertex(time, action.dest, vt))
         elif action.kind is ActionKind.CREATE_EDGE:
             events.append(LinkToVertex(time, action.dest, action.relative_rad))
             events.append(SetCurrentVertex(time, action.dest, action.relative_rad))
         elif action.kind is ActionKind.SET_NODE:
             events.append(SetCurrentVertex(time, action.dest, action.relative_rad))
-        return events
 
     # ------------------------------------------------------------------ state for a GUI
     @property

@@ -2,14 +2,25 @@
 
 As OpenRatSLAM's ``LocalViewMatch``: the camera image is cropped, resampled to a small template
 (iRat: 60x20 of rows 0-150), optionally normalised, and compared with every stored template by
-the mean absolute difference (MAD) over horizontal shifts. The central ``X - 2 s`` columns of the
-view are compared with columns ``o .. o + X - 2 s`` of the template for the offsets
-``o = 0, step, ..., 2 s``. The best (template, offset) pair is a match when its MAD is at most the
-threshold; otherwise the view becomes a new template.
+the mean absolute difference (MAD) over horizontal shifts.
 
-Templates are stored as 8-bit intensities, so the sum of absolute differences (SAD) is an exact
-integer: the fast matcher and the exhaustive one compute the very same numbers, and ties break the
-same way (lowest template id, then lowest offset, as OpenRatSLAM's strict ``<`` scan does).
+Resampling (``vt_whole_crop``). OpenRatSLAM's arithmetic (the default): each template pixel is
+the mean of a block of whole image pixels, ``floor(crop width / template_x_size)`` wide and
+``floor(crop height / template_y_size)`` high, laid from the crop's first column and row; what
+the blocks do not reach is dropped (iRat, 416 x 150 crop: 6 x 7 blocks over columns 0-359 and
+rows 0-139). Values are kept in steps of 2^-20 (:data:`VALUE_SCALE`), so the integer sums below
+are OpenRatSLAM's double-precision errors to within 5e-7. With ``vt_whole_crop = 1`` the whole
+crop is area-averaged (any decoded size) and rounded to 8 bits, cogmap's former choice.
+
+Matching. The central ``X - 2 s`` columns of the view are compared with columns
+``o .. o + X - 2 s`` of the template for the offsets ``o = 0, step, ..., 2 s``. The best
+(template, offset) pair is a match when its MAD is at most the threshold; otherwise the view
+becomes a new template.
+
+Templates are stored as integers (8-bit intensities, or 2^-20 steps), so the sum of absolute
+differences (SAD) is an exact integer: the fast matcher and the exhaustive one compute the very
+same numbers, and ties break the same way (lowest template id, then lowest offset, as
+OpenRatSLAM's strict ``<`` scan does).
 
 Fast matching. An exhaustive search costs ``T * n_offsets * X' * Y`` absolute differences. The
 fast matcher only needs the best pair *if it is a match*, so every pair whose SAD provably exceeds
@@ -32,8 +43,10 @@ same total, so the plain window sum would let most pairs through; the left-right
 speed, never the result.
 
 OpenRatSLAM also skips templates whose mean differs from the view's by more than the threshold plus
-0.005; that heuristic can reject a true match (the mean covers all columns, the comparison does not)
-and is not used: the search here is exact.
+0.005; that heuristic can reject a true match (the mean covers all columns, the comparison does
+not). With ``vt_mean_skip = 1`` (the default, OpenRatSLAM's arithmetic) those templates are
+skipped here too, by their exact pixel totals, after the pruned search; with 0 every template is
+compared.
 """
 
 from __future__ import annotations
@@ -50,6 +63,9 @@ from cogmap_core.errors import InputFileError
 from cogmap_core.frontend.config import FrontEndConfig
 
 _INITIAL_CAPACITY = 256
+#: Template values in OpenRatSLAM's arithmetic are stored as integers in units of 1 / VALUE_SCALE.
+VALUE_SCALE = 2**20
+_MEAN_EPSILON = 0.005  # OpenRatSLAM's margin of the mean test (local_view_match.cpp)
 _LEVEL2_MIN = 24  # pairs left after level 1 below which level 2 is skipped
 
 
@@ -82,7 +98,8 @@ class MatchResult:
     Attributes:
         template_id: matched template id, ``-1`` when no pair is within the threshold.
         offset: template offset of the match (``-1`` when none).
-        sad: exact sum of absolute differences (8-bit units) of the match (``-1`` when none).
+        sad: exact sum of absolute differences of the match, in units of the stored values
+            (8-bit levels, or 1 / :data:`VALUE_SCALE`; ``-1`` when none).
         candidates: pairs whose exact SAD was computed (for statistics).
 
     """
@@ -132,14 +149,24 @@ class LocalViewCells:
         self._n_off = len(self._offsets)
         self._width = self._x - 2 * self._shift  # compared columns
         self._pixels = self._width * self._y
-        # A pair matches when SAD / (pixels * 255) <= threshold; as an exact integer bound:
-        self.max_sad = int(math.floor(config.vt_match_threshold * self._pixels * 255 + 1e-6))
+        self._blocks = not config.vt_whole_crop
+        #: What an intensity of 1.0 is stored as (255 for 8-bit templates).
+        self.value_scale = VALUE_SCALE if self._blocks else 255
+        # A pair matches when SAD / (pixels * value_scale) <= threshold; as an integer bound:
+        self.max_sad = int(
+            math.floor(config.vt_match_threshold * self._pixels * self.value_scale + 1e-6)
+        )
+        self._mean_skip = bool(config.vt_mean_skip)
+        # OpenRatSLAM's mean test |mean(view) - mean(template)| > threshold + 0.005, on totals:
+        self._mean_limit = (
+            (config.vt_match_threshold + _MEAN_EPSILON) * self._x * self._y * self.value_scale
+        )
         crop_fraction = (config.image_crop_x_max - config.image_crop_x_min) / float(
             config.reference_image_width
         )
         self._rad_per_column = math.radians(config.camera_hfov_deg) * crop_fraction / self._x
         # Block partitions of the compared window: (row-sum matrix, column-sum matrix^T).
-        dt = np.float32 if self._pixels * 255 < 2**24 else np.float64
+        dt = np.float32 if self._pixels * self.value_scale < 2**24 else np.float64
         self._dtype = dt
         self._l1 = (_block_matrix(self._y, 10, dt), _block_matrix(self._width, 13, dt).T.copy())
         self._l2 = (_block_matrix(self._y, 4, dt), _block_matrix(self._width, 4, dt).T.copy())
@@ -149,8 +176,10 @@ class LocalViewCells:
         self._ones2 = np.ones(self._k2, dtype=dt)
         self._count = 0
         self._capacity = 0
-        self._templates = np.zeros((0, self._y, self._x), dtype=np.int16)
-        self._keys_all = np.zeros((0, self._n_off), dtype=np.int32)  # level-0 key of each pair
+        store = np.int32 if self._blocks else np.int16
+        self._templates = np.zeros((0, self._y, self._x), dtype=store)
+        self._sums = np.zeros(0, dtype=np.int64)  # total of each template (the mean test)
+        self._keys_all = np.zeros((0, self._n_off), dtype=np.int64)  # level-0 key of each pair
         self._candidates = _key_candidates(self._l1[0].shape[0], self._l1[1].shape[1])
         self._signs = self._candidates[0]
         self._desc1 = np.zeros((0, self._n_off, self._k1), dtype=dt)
@@ -158,11 +187,11 @@ class LocalViewCells:
         self._grow(_INITIAL_CAPACITY)
         # Sorted index over the pairs of templates [0, _indexed).
         self._indexed = 0
-        self._keys = np.zeros(0, dtype=np.int32)
+        self._keys = np.zeros(0, dtype=np.int64)
         self._ids = np.zeros(0, dtype=np.intp)
         self._sorted1 = np.zeros((self._k1, 0), dtype=dt)
-        self._query = np.zeros(2, dtype=np.int32)
-        self._plans: dict[tuple[int, ...], _AreaPlan] = {}
+        self._query = np.zeros(2, dtype=np.int64)
+        self._plans: dict[tuple[int, ...], _AreaPlan | _BlockPlan] = {}
         self.last_match: MatchResult | None = None
 
     # ----------------------------------------------------------------------------- templates
@@ -171,21 +200,26 @@ class LocalViewCells:
         """Number of stored templates."""
         return self._count
 
-    def template(self, template_id: int) -> NDArray[np.uint8]:
-        """Return a stored template as an 8-bit ``(template_y_size, template_x_size)`` image."""
+    def template(self, template_id: int) -> NDArray[Any]:
+        """Return a stored ``(template_y_size, template_x_size)`` template.
+
+        8-bit (``uint8``) with ``vt_whole_crop``; else ``int32`` in units of 1 / ``value_scale``.
+        """
         if not 0 <= template_id < self._count:
             raise IndexError(f"no template {template_id}; there are {self._count}")
-        return self._templates[template_id].astype(np.uint8)
+        return self._templates[template_id].astype(np.int32 if self._blocks else np.uint8)
 
-    def make_template(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
-        """Turn a grayscale camera image of any size into an 8-bit template.
+    def make_template(self, image: NDArray[np.uint8]) -> NDArray[Any]:
+        """Turn a grayscale camera image into a template (as :meth:`template` returns them).
 
         The crop is given in pixels of the reference image size and applied at the same
-        fractions of the actual image (fractional edges included), so a frame decoded at a
-        reduced scale gives nearly the same template. The crop is resampled by exact area
-        averaging (what ``cv2.resize`` with ``INTER_AREA`` computes; here through the integral
-        image, which is several times faster for non-integer scale factors), then optionally
-        normalised.
+        fractions of the actual image. OpenRatSLAM's arithmetic (``vt_whole_crop = 0``): block
+        means of whole pixels (module doc), normalised in double precision as OpenRatSLAM does,
+        stored in steps of 1 / ``value_scale``. With ``vt_whole_crop = 1`` the crop (fractional
+        edges included, so a frame decoded at a reduced scale gives nearly the same template) is
+        resampled by exact area averaging (what ``cv2.resize`` with ``INTER_AREA`` computes;
+        here through the integral image, which is several times faster for non-integer scale
+        factors), then optionally normalised, in 8 bits.
         """
         if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype != np.uint8:
             raise InputFileError(
@@ -194,7 +228,10 @@ class LocalViewCells:
             )
         plan = self._plans.get(image.shape)
         if plan is None:
-            plan = self._plans[image.shape] = _AreaPlan(self.config, image.shape, self._x, self._y)
+            kind = _BlockPlan if self._blocks else _AreaPlan
+            plan = self._plans[image.shape] = kind(self.config, image.shape, self._x, self._y)
+        if isinstance(plan, _BlockPlan):
+            return self._normalised_blocks(plan.resample(image))
         small = plan.resample(image)
         cfg = self.config
         if cfg.vt_normalisation <= 0 and cfg.vt_patch_normalise <= 0:
@@ -210,13 +247,27 @@ class LocalViewCells:
             )
         return np.rint(view * 255.0).astype(np.uint8)
 
-    def add(self, template: NDArray[np.uint8]) -> int:
+    def _normalised_blocks(self, view: NDArray[np.float64]) -> NDArray[np.int32]:
+        """OpenRatSLAM's normalisations of a block-mean view (in [0, 1]), then fixed point."""
+        cfg = self.config
+        if cfg.vt_normalisation > 0:
+            mean = float(view.sum()) / view.size
+            if mean > 0:  # OpenRatSLAM's 0 / 0 of a black view also ends at 0
+                view = np.clip(view * cfg.vt_normalisation / mean, 0.0, 1.0)
+        if cfg.vt_patch_normalise > 0:
+            view = _patch_normalise(
+                view, cfg.vt_patch_normalise, cfg.vt_min_patch_normalisation_std
+            )
+        return np.rint(view * float(VALUE_SCALE)).astype(np.int32)
+
+    def add(self, template: NDArray[Any]) -> int:
         """Store ``template`` and return its id (``0, 1, 2, ...``)."""
         tmpl = self._check(template)
         if self._count == self._capacity:
             self._grow(2 * self._capacity)
         index = self._count
         self._templates[index] = tmpl
+        self._sums[index] = int(tmpl.sum(dtype=np.int64))
         windows = np.stack([tmpl[:, o : o + self._width] for o in self._offsets])
         windows = windows.astype(self._dtype)
         self._desc1[index] = (self._l1[0] @ windows @ self._l1[1]).reshape(self._n_off, -1)
@@ -227,13 +278,16 @@ class LocalViewCells:
             self._rebuild_index()
         return index
 
-    def _check(self, template: NDArray[np.uint8]) -> NDArray[np.int16]:
-        if template.shape != (self._y, self._x) or template.dtype != np.uint8:
+    def _check(self, template: NDArray[Any]) -> NDArray[Any]:
+        want = np.int32 if self._blocks else np.uint8
+        if template.shape != (self._y, self._x) or template.dtype != want:
             raise ValueError(
-                f"template must be uint8 of shape {(self._y, self._x)}, "
+                f"template must be {np.dtype(want)} of shape {(self._y, self._x)}, "
                 f"got {template.dtype} {template.shape}"
             )
-        return template.astype(np.int16)
+        if self._blocks and (template.min() < 0 or template.max() > VALUE_SCALE):
+            raise ValueError(f"template values must be in [0, {VALUE_SCALE}]")
+        return template.astype(self._templates.dtype)
 
     def _grow(self, capacity: int) -> None:
         n = self._count
@@ -244,6 +298,7 @@ class LocalViewCells:
             return b
 
         self._templates = grown(self._templates)
+        self._sums = grown(self._sums)
         self._keys_all = grown(self._keys_all)
         self._desc1 = grown(self._desc1)
         self._desc2 = grown(self._desc2)
@@ -253,9 +308,9 @@ class LocalViewCells:
         self._windows = windows[:, :, 0 : last : self.config.vt_step_match, :]  # a view, no copy
         self._capacity = capacity
 
-    def _key_of(self, desc1: NDArray[Any]) -> NDArray[np.int32]:
+    def _key_of(self, desc1: NDArray[Any]) -> NDArray[np.int64]:
         """Level-0 keys of level-1 descriptors ``(..., k1)`` (exact integers)."""
-        return np.rint(desc1.astype(np.float64) @ self._signs).astype(np.int32)
+        return np.rint(desc1.astype(np.float64) @ self._signs).astype(np.int64)
 
     def _rebuild_index(self) -> None:
         """Choose the key's signs, then sort the pairs of all templates by key for search."""
@@ -285,7 +340,8 @@ class LocalViewCells:
 
         ``hint`` (e.g. the previous frame's template) only speeds the search up: its SAD
         tightens the bound before the cascade. The result is identical to
-        :meth:`match_exhaustive`.
+        :meth:`match_exhaustive`. With ``vt_mean_skip`` templates that fail OpenRatSLAM's mean
+        test are left out (of the hint too).
         """
         view = self._check(template)
         count = self._count
@@ -295,6 +351,9 @@ class LocalViewCells:
         centre = view[:, self._shift : self._shift + self._width]
         bound = self.max_sad
         evaluated = 0
+        allowed = self._allowed(view) if self._mean_skip else None
+        if allowed is not None and hint is not None and 0 <= hint < count and not allowed[hint]:
+            hint = None
         if hint is not None and 0 <= hint < count:
             sads = np.abs(self._windows[hint] - centre[:, None, :]).sum(axis=(0, 2))
             evaluated += len(sads)
@@ -323,6 +382,8 @@ class LocalViewCells:
         if not found:
             return MatchResult(-1, -1, -1, evaluated)
         flat = found[0] if len(found) == 1 else np.concatenate(found)
+        if allowed is not None:
+            flat = flat[allowed[flat // n_off]]
         if len(flat) > _LEVEL2_MIN:  # for a few pairs the exact SAD is as cheap as level 2
             v2 = (self._l2[0] @ fc @ self._l2[1]).ravel()
             d = self._desc2.reshape(-1, self._k2)[flat] - v2
@@ -350,6 +411,8 @@ class LocalViewCells:
         centre = view[:, self._shift : self._shift + self._width]
         windows = self._windows[:count]  # (count, Y, n_off, width)
         diff = np.abs(windows - centre[None, :, None, :]).sum(axis=(1, 3), dtype=np.int64)
+        if self._mean_skip:
+            diff[~self._allowed(view)] = np.iinfo(np.int64).max
         flat = int(np.argmin(diff))  # (template, offset) row-major: first minimum wins
         t, o = divmod(flat, self._n_off)
         sad = int(diff[t, o])
@@ -357,6 +420,11 @@ class LocalViewCells:
         if sad > self.max_sad:
             return MatchResult(-1, -1, -1, evaluated)
         return MatchResult(t, int(self._offsets[o]), sad, evaluated)
+
+    def _allowed(self, view: NDArray[Any]) -> NDArray[np.bool_]:
+        """Templates that pass OpenRatSLAM's mean test against ``view`` (one flag each)."""
+        total = int(view.sum(dtype=np.int64))
+        return np.abs(self._sums[: self._count] - total) <= self._mean_limit
 
     def observe(self, image: NDArray[np.uint8], hint: int | None = None) -> ViewMatch:
         """Present a camera image: match it or store it as a new template (``on_image``)."""
@@ -370,7 +438,7 @@ class LocalViewCells:
             False,
             result.offset,
             self.relative_rad(result.offset),
-            result.sad / (self._pixels * 255.0),
+            result.sad / (self._pixels * float(self.value_scale)),
         )
 
     def relative_rad(self, offset: int) -> float:
@@ -381,6 +449,53 @@ class LocalViewCells:
         columns' worth of angle counter-clockwise since the template was stored.
         """
         return (self._shift - offset) * self._rad_per_column
+
+
+class _BlockPlan:
+    """OpenRatSLAM's template geometry for one image size: means of whole-pixel blocks.
+
+    The crop (reference pixels, scaled to the decoded size and rounded) is cut into blocks of
+    ``floor(crop width / out_x)`` by ``floor(crop height / out_y)`` pixels from its first column
+    and row; pixels past the last whole block are not used (``convert_view_to_view_template``).
+    """
+
+    def __init__(
+        self, config: FrontEndConfig, shape: tuple[int, ...], out_x: int, out_y: int
+    ) -> None:
+        height, width = shape[0], shape[1]
+        sx = width / config.reference_image_width
+        sy = height / config.reference_image_height
+        x0 = round(config.image_crop_x_min * sx)
+        x1 = min(width, round(config.image_crop_x_max * sx))
+        y0 = round(config.image_crop_y_min * sy)
+        y1 = min(height, round(config.image_crop_y_max * sy))
+        self.bx = (x1 - x0) // out_x
+        self.by = (y1 - y0) // out_y
+        if self.bx < 1 or self.by < 1:
+            min_w, min_h = config.minimum_image_size()
+            raise InputFileError(
+                f"camera images of {width}x{height} px (as decoded) are too small for the "
+                f"{out_x}x{out_y} view template: their crop is {x1 - x0}x{y1 - y0} px; "
+                f"images must be at least {min_w}x{min_h} px as decoded"
+            )
+        self.rows = slice(y0, y0 + self.by * out_y)
+        self.cols = slice(x0, x0 + self.bx * out_x)
+        self.out_x, self.out_y = out_x, out_y
+        self.divisor = float(self.bx * self.by)
+        # block corners in the integral image of the used part
+        self.ys = np.arange(out_y + 1) * self.by
+        self.xs = np.arange(out_x + 1) * self.bx
+
+    def resample(self, image: NDArray[np.uint8]) -> NDArray[np.float64]:
+        """Block means in [0, 1]: ``sum / 255 / pixels`` as OpenRatSLAM divides.
+
+        The block sums are exact integers, from the integral image (OpenCV's, in float64: exact
+        up to 2^53).
+        """
+        crop = image[self.rows, self.cols]
+        corners = cv2.integral(crop, sdepth=cv2.CV_64F).take(self.ys, axis=0).take(self.xs, axis=1)
+        sums = corners[1:, 1:] - corners[:-1, 1:] - corners[1:, :-1] + corners[:-1, :-1]
+        return sums / 255.0 / self.divisor
 
 
 class _AreaPlan:

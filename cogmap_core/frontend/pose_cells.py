@@ -7,11 +7,14 @@ Dynamics per odometry update (OpenRatSLAM's ``PosecellNetwork::on_odo``):
    Gaussian;
 3. global inhibition: subtract a constant, clip at 0;
 4. normalisation to a total activity of 1;
-5. path integration: every theta layer ``k`` (heading ``k * 2 pi / n_th``) is shifted along its
-   heading by the translation in cells, with bilinear weights (OpenRatSLAM's four-quadrant
+5. path integration: every theta layer ``k`` (heading ``k * 2 pi / n_th``, which OpenRatSLAM
+   lays along ``(sin, cos)`` of ``(x, y)``) is shifted along its heading by the translation in
+   cells, with bilinear weights (OpenRatSLAM's four-quadrant
    weights are exactly bilinear interpolation), then the whole network is shifted along theta by
    the rotation in cells with linear weights; everything wraps around;
-6. the peak is decoded by population-vector averaging around the most active cell.
+6. the peak is decoded by population-vector averaging around the most active cell, with
+   OpenRatSLAM's arithmetic (cell ``i`` at angle ``(i + 1) 2 pi / n``, then 1 subtracted,
+   sums in its order), so a peak that sits on a cell decodes to the same side of it.
 
 Both Gaussian kernels are separable, so the convolutions are three 1-D circulant matrix products
 each. Cells are indexed ``[theta, y, x]``.
@@ -73,16 +76,21 @@ class PoseCellNetwork:
         headings = np.arange(self.n_th) * self.th_size
         self._cos = np.cos(headings)
         self._sin = np.sin(headings)
-        self._cos_sin = np.concatenate([self._cos, self._sin])
+        # OpenRatSLAM's layout: heading theta moves the activity by (sin, cos) along (x, y), i.e.
+        # heading 0 runs along +y and 90 degrees along +x (its layers are rotated by rot90 to
+        # move them); the same cells in the same memory order, so ties and sums match too.
+        self._cos_sin = np.concatenate([self._sin, self._cos])
+        self._edge_loss = [_edge_loss_plan(self.n_xy, self.n_th, back) for back in (False, True)]
         # _perm_xy[m] moves every element m cells forward along an axis: (v @ P[m])[i] = v[i - m].
         self._perm_xy = _permutations(self.n_xy)
         self._perm_th_t = np.ascontiguousarray(_permutations(self.n_th).transpose(0, 2, 1))
         c = config.pc_cells_to_avg
         self._avg_offsets = np.arange(-c, c + 1)
-        angle_xy = 2.0 * math.pi * np.arange(self.n_xy) / self.n_xy
-        angle_th = 2.0 * math.pi * np.arange(self.n_th) / self.n_th
-        self._sincos_xy = np.stack([np.sin(angle_xy), np.cos(angle_xy)], axis=1)
-        self._sincos_th = np.stack([np.sin(angle_th), np.cos(angle_th)], axis=1)
+        # OpenRatSLAM's lookups: cell i at angle (i + 1) 2 pi / n (1 is subtracted after atan2).
+        angle_xy = (np.arange(self.n_xy) + 1.0) * 2.0 * math.pi / self.n_xy
+        angle_th = (np.arange(self.n_th) + 1.0) * 2.0 * math.pi / self.n_th
+        self._sincos_xy = np.stack([np.sin(angle_xy), np.cos(angle_xy)], axis=1).tolist()
+        self._sincos_th = np.stack([np.sin(angle_th), np.cos(angle_th)], axis=1).tolist()
         self.cells = np.zeros((self.n_th, self.n_xy, self.n_xy))
         bx = by = self.n_xy // 2
         bth = self.n_th // 2
@@ -91,7 +99,16 @@ class PoseCellNetwork:
 
     # ---------------------------------------------------------------------------- dynamics
     def inject(self, x: float, y: float, th: float, energy: float) -> None:
-        """Add ``energy`` to the cell nearest to pose-cell coordinates ``(x, y, th)``."""
+        """Add ``energy`` to the cell of pose-cell coordinates ``(x, y, th)``.
+
+        OpenRatSLAM's arithmetic (``pc_inject_nearest = 0``): the coordinates truncated towards
+        zero, nothing when that is outside the network; else the nearest cell, wrapping.
+        """
+        if not self.config.pc_inject_nearest:
+            ix, iy, ith = int(x), int(y), int(th)
+            if 0 <= ix < self.n_xy and 0 <= iy < self.n_xy and 0 <= ith < self.n_th:
+                self.cells[ith, iy, ix] += energy
+            return
         ix = int(math.floor(x + 0.5)) % self.n_xy
         iy = int(math.floor(y + 0.5)) % self.n_xy
         ith = int(math.floor(th + 0.5)) % self.n_th
@@ -101,13 +118,15 @@ class PoseCellNetwork:
         """Local excitation, local inhibition, global inhibition and normalisation."""
         p = self.cells
         n_th, n = self.n_th, self.n_xy
-        q = p @ self._e_xy
-        q = np.matmul(self._e_xy_t, q)
-        q = (self._e_th_t @ q.reshape(n_th, n * n)).reshape(n_th, n, n)
-        r = q @ self._i_xy
-        r = np.matmul(self._i_xy_t, r)
-        r = (self._i_th_t @ r.reshape(n_th, n * n)).reshape(n_th, n, n)
-        q -= r
+        # Each spread along x or y is one matrix product over all rows of the network: the
+        # layers are transposed in between ([th, y, x] -> [th, x, y] -> [th, y, x]).
+        a = (p.reshape(-1, n) @ self._e_xy).reshape(n_th, n, n)  # along x
+        a = a.transpose(0, 2, 1).reshape(-1, n) @ self._e_xy  # along y: [th, x, y]
+        q_xy = self._e_th_t @ a.reshape(n_th, n * n)  # along theta
+        r = (q_xy.reshape(-1, n) @ self._i_xy).reshape(n_th, n, n)  # along y
+        r = r.transpose(0, 2, 1).reshape(-1, n) @ self._i_xy  # along x: [th, y, x]
+        r = self._i_th_t @ r.reshape(n_th, n * n)  # along theta
+        q = q_xy.reshape(n_th, n, n).transpose(0, 2, 1) - r.reshape(n_th, n, n)
         q -= self.config.pc_global_inhib
         np.maximum(q, 0.0, out=q)
         total = float(q.sum())
@@ -137,11 +156,23 @@ class PoseCellNetwork:
             self.cells = (shift @ self.cells.reshape(self.n_th, n * n)).reshape(self.n_th, n, n)
 
     def _translate(self, p: FloatArray, v: float) -> FloatArray:
-        """Shift each theta layer by ``v`` cells along its heading (bilinear, wrap-around)."""
+        """Shift each theta layer by ``v`` cells along its heading (bilinear, wrap-around).
+
+        With ``pc_edge_loss`` (and ``|v| < 1`` cell, all OpenRatSLAM supports) the two shares
+        its wrap-around drops are taken off again (:func:`_edge_loss_plan`).
+        """
         s = self._shift_matrices(v * self._cos_sin)  # (2 n_th, n, n)
         sx = s[: self.n_th]  # acts on x from the right
         sy_t = s[self.n_th :].transpose(0, 2, 1)  # acts on y from the left
-        return np.matmul(np.matmul(sy_t, p), sx)
+        moved = np.matmul(np.matmul(sy_t, p), sx)
+        if self.config.pc_edge_loss and abs(v) < 1.0:
+            layers, first, second, dest, cos90, sin90 = self._edge_loss[v < 0]
+            a = abs(v) * cos90  # movement along the rotated frame's rows and columns
+            b = abs(v) * sin90
+            lost = p[layers, first[0], first[1]] * (a * (1.0 - b))
+            lost += p[layers, second[0], second[1]] * (b * (1.0 - a))
+            moved[layers, dest[0], dest[1]] -= lost
+        return moved
 
     def _shift_matrices(self, d: FloatArray) -> FloatArray:
         """Per-layer ``S`` with ``(row @ S)`` = row shifted by ``d[k]`` cells (linear weights)."""
@@ -157,10 +188,12 @@ class PoseCellNetwork:
         return a
 
     def find_best(self) -> tuple[float, float, float]:
-        """Decode the activity peak ``(x, y, th)`` in cell units, each in ``[0, dim)``.
+        """Decode the activity peak ``(x, y, th)`` in cell units, each in ``[0, dim]``.
 
         Population-vector (circular mean) decoding over the cells within ``pc_cells_to_avg`` of
-        the most active cell (the first maximum in ``[th, y, x]`` order), as OpenRatSLAM.
+        the most active cell (the first maximum in ``[th, y, x]`` order), as OpenRatSLAM's
+        ``find_best`` computes it: per-axis sums accumulated in its loop order, then the sine and
+        cosine sums over the cells in index order (sequential sums, as its loops).
         """
         p = self.cells
         k, j, i = np.unravel_index(int(np.argmax(p)), p.shape)
@@ -168,10 +201,15 @@ class PoseCellNetwork:
         ith = (k + off) % self.n_th
         iy = (j + off) % self.n_xy
         ix = (i + off) % self.n_xy
-        sub = p.take(ith, axis=0).take(iy, axis=1).take(ix, axis=2)
-        x = _circular_mean(sub.sum(axis=(0, 1)) @ self._sincos_xy[ix], self.n_xy)
-        y = _circular_mean(sub.sum(axis=(0, 2)) @ self._sincos_xy[iy], self.n_xy)
-        th = _circular_mean(sub.sum(axis=(1, 2)) @ self._sincos_th[ith], self.n_th)
+        sub = p.take(ith, axis=0).take(iy, axis=1).take(ix, axis=2)  # [th, y, x]
+        w = len(off)
+        # Reductions over a leading axis add row after row: OpenRatSLAM's k-then-j (-then-i) order.
+        x_sums = sub.reshape(w * w, w).sum(axis=0)
+        y_sums = np.ascontiguousarray(sub.transpose(0, 2, 1)).reshape(w * w, w).sum(axis=0)
+        z_sums = np.ascontiguousarray(sub.reshape(w, w * w).T).sum(axis=0)
+        x = _ors_decode(x_sums, ix, self._sincos_xy, self.n_xy)
+        y = _ors_decode(y_sums, iy, self._sincos_xy, self.n_xy)
+        th = _ors_decode(z_sums, ith, self._sincos_th, self.n_th)
         self.best = (x, y, th)
         return self.best
 
@@ -190,6 +228,73 @@ class PoseCellNetwork:
         )
 
 
+EdgeLossPlan = tuple[
+    NDArray[np.intp],
+    tuple[NDArray[np.intp], NDArray[np.intp]],
+    tuple[NDArray[np.intp], NDArray[np.intp]],
+    tuple[NDArray[np.intp], NDArray[np.intp]],
+    FloatArray,
+    FloatArray,
+]
+
+
+def _edge_loss_plan(n: int, n_th: int, backwards: bool) -> EdgeLossPlan:
+    """Where OpenRatSLAM's path integration loses activity, per heading layer.
+
+    OpenRatSLAM rotates each layer by a multiple of 90 degrees (its heading's quadrant; a
+    backward move adds 180) so the move points into the first quadrant: ``a = |v| cos(d)``
+    cells along the rotated rows and ``b = |v| sin(d)`` along the columns, ``d`` the heading
+    within the quadrant. It spreads the layer into a border one cell wider, then folds the far
+    row and column back onto the first ones, but both loops start at index 1: the share
+    ``a (1 - b)`` of the cell in the last row and first column, and ``b (1 - a)`` of the cell in
+    the first row and last column, which would wrap into the first cell, are dropped. Returns
+    the layers, those two cells and the first cell in unrotated ``(y, x)`` indices, and each
+    layer's ``cos(d)`` and ``sin(d)``, computed as OpenRatSLAM does.
+    """
+    size = (2.0 * math.pi) / n_th
+    last = n - 1
+    # the rotated frame's rows and columns as (axis, forward?) of the layer, per quadrant
+    frames = {
+        0: (("y", True), ("x", True)),
+        1: (("x", True), ("y", False)),
+        2: (("y", False), ("x", False)),
+        3: (("x", False), ("y", True)),
+    }
+    first_y, first_x, second_y, second_x, dest_y, dest_x, cos90, sin90 = ([] for _ in range(8))
+    for k in range(n_th):
+        direction = k * size + (math.pi if backwards else 0.0)
+        turns = math.floor(direction * 2.0 / math.pi)
+        d90 = direction - turns * math.pi / 2
+        (row_axis, row_fwd), (col_axis, col_fwd) = frames[turns % 4]
+        far_row, up_row = (last, 0) if row_fwd else (0, last)
+        far_col, up_col = (last, 0) if col_fwd else (0, last)
+
+        def cell(row: int, col: int, row_axis: str = row_axis) -> tuple[int, int]:
+            return (row, col) if row_axis == "y" else (col, row)  # -> (y, x)
+
+        for (ys, xs), (y, x) in (
+            ((first_y, first_x), cell(far_row, up_col)),
+            ((second_y, second_x), cell(up_row, far_col)),
+            ((dest_y, dest_x), cell(up_row, up_col)),
+        ):
+            ys.append(y)
+            xs.append(x)
+        cos90.append(math.cos(d90))
+        sin90.append(math.sin(d90))
+
+    def pair(ys: list[int], xs: list[int]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        return np.array(ys, dtype=np.intp), np.array(xs, dtype=np.intp)
+
+    return (
+        np.arange(n_th),
+        pair(first_y, first_x),
+        pair(second_y, second_x),
+        pair(dest_y, dest_x),
+        np.array(cos90),
+        np.array(sin90),
+    )
+
+
 def _permutations(n: int) -> FloatArray:
     """``P[m]`` (n x n) with ``(v @ P[m])[i] = v[(i - m) % n]``: a circular shift by ``m``."""
     src = np.arange(n)[None, :, None]
@@ -198,10 +303,22 @@ def _permutations(n: int) -> FloatArray:
     return ((dst - src) % n == m).astype(np.float64)
 
 
-def _circular_mean(sin_cos: FloatArray, dim: int) -> float:
-    """Circular mean, in cell units ``[0, dim)``, from summed ``(sin, cos)`` of cell angles."""
-    value = math.atan2(float(sin_cos[0]), float(sin_cos[1])) * dim / (2.0 * math.pi) % dim
-    return 0.0 if value >= dim else float(value)  # -0.0 rounding can give exactly dim
+def _ors_decode(
+    sums: FloatArray, cells: NDArray[np.intp], sincos: list[list[float]], dim: int
+) -> float:
+    """OpenRatSLAM's circular mean of per-cell ``sums`` (at ``cells``): cells in index order."""
+    s = c = 0.0
+    # sequential double sums, as its loop over the cells (few: plain floats are fastest)
+    for cell, total in sorted(zip(cells.tolist(), sums.tolist(), strict=True)):
+        sin_cell, cos_cell = sincos[cell]
+        s += sin_cell * total
+        c += cos_cell * total
+    value = math.atan2(s, c) * dim / (2.0 * math.pi) - 1.0
+    while value < 0:
+        value += dim
+    while value > dim:
+        value -= dim
+    return value
 
 
 def _wrapped(delta: float, dim: int) -> float:
@@ -270,6 +387,10 @@ class PoseCellExperiences:
         """Pose-cell coordinates ``(x, y, th)`` recorded for experience ``exp_id``."""
         return self._experiences[exp_id]
 
+    def experience_view(self, exp_id: int) -> int:
+        """The view template experience ``exp_id`` was created with."""
+        return self._experience_vt[exp_id]
+
     def view_decay(self, vt: int) -> float:
         """Return the current decay of view cell ``vt`` (grows while the view persists)."""
         return self._decay_now(self._views[vt])
@@ -303,7 +424,7 @@ class PoseCellExperiences:
                 cfg.vt_active_decay,
                 cell.decay - cfg.pc_vt_restore * (self._frame - 1 - cell.decay_frame),
             )
-            if vt + cfg.vt_recent_no_inject < len(self._views):
+            if self._may_inject(vt):
                 if vt == self.current_vt:
                     decay += cfg.vt_active_decay
                 energy = cfg.pc_vt_inject_energy / 30.0 * (30.0 - math.exp(1.2 * decay))
@@ -316,6 +437,19 @@ class PoseCellExperiences:
         self.prev_vt = self.current_vt
         self.current_vt = vt
         self._vt_update = True
+
+    def _may_inject(self, vt: int) -> bool:
+        """Whether familiar view ``vt`` injects energy (not among the newest templates).
+
+        OpenRatSLAM tests ``vt < visual_templates.size() - 10`` in unsigned arithmetic: while
+        there are fewer than 10 (``vt_recent_no_inject``) templates the difference wraps around
+        and every familiar view injects (``pc_inject_nearest = 0``); otherwise none of the
+        newest do.
+        """
+        known, recent = len(self._views), self.config.vt_recent_no_inject
+        if not self.config.pc_inject_nearest and known < recent:
+            return True
+        return vt + recent < known
 
     def on_odo(self, translation_m: float, rotation_rad: float) -> None:
         """Odometry since the previous frame: one network update."""

@@ -1,10 +1,14 @@
 """Which kind of input a path is, and one way to open any of them.
 
 Kinds: ``bag`` (a ROS bag with camera, odometry and ground truth: the RatSLAM front end runs on
-it), ``tuc`` (a TUC SLAM dataset input file) and ``csv`` (plain CSV odometry with loop and
-ground-truth files beside it). :func:`detect_format` looks at the content: a ROS1 bag starts
-with ``#ROSBAG``, a ROS2 bag is a folder or an ``.mcap``/``.db3`` file, a TUC file's lines start
-with ``odom2``/``loop``, a CSV file's with three comma-separated fields (the first line that is
+it), ``video`` (a video file) and ``images`` (a folder of images): camera only, their motion
+from RatSLAM's visual odometry (:mod:`cogmap_core.datasets.camera_common`), ``tuc`` (a TUC SLAM
+dataset input file) and ``csv`` (plain CSV odometry with loop and ground-truth files beside it).
+:func:`detect_format` looks at the content: a ROS1 bag starts with ``#ROSBAG``, a ROS2 bag is a
+folder with its ``metadata.yaml`` or an ``.mcap``/``.db3`` file, a video is named by its suffix
+(:data:`~cogmap_core.datasets.video_reader.VIDEO_SUFFIXES`), another folder holding images is an
+image folder, a TUC file's lines start with ``odom2``/``loop``, a CSV file's with three
+comma-separated fields (the first line that is
 not blank or a ``#`` comment decides; a UTF-8 byte-order mark is skipped).
 
 Each kind brings its defaults (:class:`InputKind`): the map parameters and the tolerances the
@@ -18,12 +22,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cogmap_core.config import MapParams
+from cogmap_core.datasets.camera_common import CameraReader
+from cogmap_core.datasets.image_folder import image_files, open_image_folder
 from cogmap_core.datasets.odometry_csv import looks_like_csv, read_odometry_csv
+from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.datasets.rosbag_reader import BagReader, open_bag
 from cogmap_core.datasets.topics import BagTopics
 from cogmap_core.datasets.tuc import looks_like_tuc, read_tuc
+from cogmap_core.datasets.video_reader import VIDEO_SUFFIXES, open_video
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.frontend.config import FrontEndConfig
 from cogmap_core.sources.log_text import BOM
 from cogmap_core.sources.odometry_log import (
     LOG_EVALUATION,
@@ -32,7 +41,7 @@ from cogmap_core.sources.odometry_log import (
     LogSourceConfig,
 )
 
-FORMATS = ("bag", "tuc", "csv")
+FORMATS = ("bag", "video", "images", "tuc", "csv")
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")
 SNIFF_LIMIT = 1 << 20
 """Bytes :func:`detect_format` reads to find the first line that is not blank or a comment."""
@@ -43,7 +52,7 @@ class InputKind:
     """A kind of input and its defaults.
 
     Attributes:
-        name: ``bag``, ``tuc`` or ``csv``.
+        name: ``bag``, ``video``, ``images``, ``tuc`` or ``csv``.
         has_camera: frames carry camera images (the RatSLAM front end runs on them).
         map_params: default map parameters.
         evaluation: how its maps and loop closures are judged against ground truth.
@@ -58,6 +67,8 @@ class InputKind:
 
 KINDS: dict[str, InputKind] = {
     "bag": InputKind("bag", True, MapParams(), EvaluationSettings()),
+    "video": InputKind("video", True, MapParams(), EvaluationSettings()),
+    "images": InputKind("images", True, MapParams(), EvaluationSettings()),
     "tuc": InputKind("tuc", False, LOG_MAP_PARAMS, LOG_EVALUATION),
     "csv": InputKind("csv", False, LOG_MAP_PARAMS, LOG_EVALUATION),
 }
@@ -90,6 +101,10 @@ def check_sessions_allowed(fmt: str, path: Path | str | None, flag: str, advice:
         ParameterError: ``{flag}: sessions are for bags; {path} is a log ... ({fmt}): {advice}``.
 
     """
+    if fmt in ("video", "images"):
+        raise ParameterError(
+            f"{flag}: sessions are for bags; {path} is a camera-only input ({fmt}): {advice}"
+        )
     if not KINDS[fmt].has_camera:
         raise ParameterError(
             f"{flag}: sessions are for bags; {path} is a log of odometry and place recognition "
@@ -113,7 +128,25 @@ def check_companions(kind: str, loops: Path | None, ground_truth: Path | None) -
         raise ParameterError("--loops belongs to CSV logs; a TUC input file holds its loops")
 
 
-Source = BagReader | LogReader
+@dataclass(frozen=True)
+class CameraOptions:
+    """How to read a camera (bags, videos, image folders).
+
+    Attributes:
+        odometry: a bag's motion: ``auto`` (its odometry topic, else the camera's), ``wheel``
+            or ``visual`` (RatSLAM's visual odometry); videos and image folders are always
+            ``visual``.
+        fps: frame rate of a video or image folder without a times file.
+        frontend: the visual odometry's settings (None: the input's profile or the defaults).
+
+    """
+
+    odometry: str = "auto"
+    fps: float | None = None
+    frontend: FrontEndConfig | None = None
+
+
+Source = BagReader | LogReader | CameraReader
 """A reader of any kind: ``info`` (``duration``, ``frame_count``), ``frames(start_time)``,
 ``counters``, ``warnings`` and ``close()`` (a context manager)."""
 
@@ -126,10 +159,21 @@ def detect_format(path: str | Path) -> str:
 
     """
     path = Path(path)
-    if path.is_dir() or path.suffix.lower() in BAG_SUFFIXES:
+    if path.is_dir():
+        is_ros2 = (path / "metadata.yaml").exists() or any(
+            p.suffix.lower() in BAG_SUFFIXES for p in path.iterdir()
+        )
+        if is_ros2 or not image_files(path):
+            return "bag"
+        return "images"
+    if path.suffix.lower() in BAG_SUFFIXES:
         return "bag"
+    if path.suffix.lower() in VIDEO_SUFFIXES:
+        return "video"
     if not path.exists():
-        raise InputFileError(f"{path}: no such file; give a bag, a TUC log or a CSV log")
+        raise InputFileError(
+            f"{path}: no such file; give a bag, a video, a folder of images, a TUC log or a CSV log"
+        )
     try:
         with path.open("rb") as handle:
             head = handle.read(SNIFF_LIMIT)
@@ -184,10 +228,11 @@ def open_source(
     fmt: str | None = None,
     *,
     topics: BagTopics | None = None,
-    image_scale: int = 4,
+    image_scale: int = 1,
     log: LogOptions | None = None,
     on_clock_jump: str = "drop",
     on_corrupt: str = "error",
+    camera: CameraOptions | None = None,
 ) -> Source:
     """Open any input for streaming (format detected from the content unless given).
 
@@ -200,6 +245,8 @@ def open_source(
         on_clock_jump: where a bag's clock jumps back, ``drop`` or ``stop`` (bags only; see
             :func:`~cogmap_core.datasets.rosbag_reader.open_bag`).
         on_corrupt: a bag corrupt part-way, ``error`` or ``stop`` (bags only).
+        camera: where a camera input's motion comes from, its frame rate and the visual
+            odometry's settings (bags, videos, image folders).
 
     Raises:
         CogmapError: the input cannot be read (one line naming the problem).
@@ -207,7 +254,13 @@ def open_source(
     """
     kind = resolve_format(path, fmt)
     log = log or LogOptions()
+    camera = camera or CameraOptions()
     check_companions(kind, log.loops, log.ground_truth)
+    if kind in ("video", "images") and camera.odometry == "wheel":
+        raise ParameterError(f"--odometry wheel: {path} is camera only ({kind}); it has none")
+    frontend = camera.frontend
+    if frontend is None and kind in ("bag", "video", "images"):
+        frontend = frontend_config_for(path)
     if kind == "bag":
         return open_bag(
             path,
@@ -215,7 +268,13 @@ def open_source(
             image_scale=image_scale,
             on_clock_jump=on_clock_jump,
             on_corrupt=on_corrupt,
+            odometry=camera.odometry,
+            frontend=frontend,
         )
+    if kind == "video":
+        return open_video(path, camera.fps, frontend)
+    if kind == "images":
+        return open_image_folder(path, camera.fps, frontend)
     if kind == "tuc":
         data = read_tuc(path, log.ground_truth, log.use_ground_truth)
     else:

@@ -37,7 +37,7 @@ def record(name: str, config: MazeConfig) -> Path:
         generate_maze_bag(bag, config)
         frontend = frontend_config_for(bag)
         session = SlamSession(frontend_config=frontend, modes=())
-        with open_bag(bag, image_scale=4) as reader:
+        with open_bag(bag, image_scale=1) as reader:  # full size, as cogmap run
             for frame in reader.frames():
                 session.process(frame)
         source = f"{config.layout}, {config.laps} laps, seed {config.seed}"
