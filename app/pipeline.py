@@ -40,7 +40,7 @@ from cogmap_core.g2o import write_g2o
 from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
-from cogmap_core.slam import SlamSession, optimisation_summary
+from cogmap_core.slam import SlamSession, map_false_loop_edges, optimisation_summary
 from cogmap_core.sources.detect import (
     KINDS,
     LogOptions,
@@ -239,6 +239,9 @@ def session_summary(
         entry["short_edges_removed"] = c.short_edges
         entry["duplicate_links"] = c.duplicate_links
         entry["refused_relocalisations"] = c.refused_relocalisations
+        # loop-closure edges of the map made from a link the ground truth calls false (the
+        # page's "false loop closures in the map"; None without ground truth)
+        entry["false_loop_edges"] = map_false_loop_edges(session.log, cmap, judging, final.snapshot)
         entries[mode.value] = entry
     score = session.loop_closure_score()
     links = session.log.link_table()

@@ -738,7 +738,7 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
     Views take it briefly for what they read; the figures are computed from inputs taken under it.
     """
     with _idle_app_with_one_viewer(short_bag) as app:
-        figures, false_times = dict(app._figures), app._false_times.copy()
+        figures, links = dict(app._figures), app._links
         assert len(figures) == len(ALL_MODES)
         free: list[tuple[str, bool]] = []
 
@@ -749,9 +749,7 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
 
             return call
 
-        monkeypatch.setattr(
-            app_module, "false_link_times", spy("false links", app_module.false_link_times)
-        )
+        monkeypatch.setattr(app_module, "judge_links", spy("false links", app_module.judge_links))
         monkeypatch.setattr(
             app_module, "compute_figures", spy("figures", app_module.compute_figures)
         )
@@ -770,7 +768,8 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
             ("view", True)
         ]
         assert app._figures == figures
-        np.testing.assert_array_equal(app._false_times, false_times)
+        np.testing.assert_array_equal(app._links.time, links.time)
+        np.testing.assert_array_equal(app._links.false, links.false)
         # the per-frame update refreshes each view outside the replay lock too
         free.clear()
         app.on_maps(app.replay, ALL_MODES, forced=True)

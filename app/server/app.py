@@ -43,12 +43,15 @@ from app.server.export import (
     summary_inputs,
 )
 from app.server.figures import (
+    NO_LINKS,
     FigureInputs,
+    LinkJudgement,
     MapFigures,
     compute_figures,
     false_link_inputs,
-    false_link_times,
+    false_link_label,
     figure_inputs,
+    judge_links,
     layout_radius_label,
 )
 from app.server.files import DataFile, DataFolders, ExportFolder, Scrubber, default_export_dir
@@ -231,7 +234,7 @@ class CogmapApp:
         self._figures: dict[MapMode, MapFigures] = {}
         self._figures_key: dict[MapMode, tuple[int, ...]] = {}
         self.stats_version = 0
-        self._false_times = np.zeros(0)
+        self._links: LinkJudgement = NO_LINKS  # the log's links and the truth's verdicts
         self._false_key: tuple[int, int] | None = None
         self._odometry_key: tuple[int, int] | None = None
         self._odometry = np.zeros((0, 3))
@@ -556,12 +559,13 @@ class CogmapApp:
         with self.replay.lock:
             for mode in view.state.shown:
                 local = point - np.array([offsets[mode.value], 0.0])
+                figures = self._figures.get(mode)
                 found = nearest_pick(
                     self.replay.session.maps[mode],
                     mode,
                     local,
                     tolerance,
-                    self._false_times,
+                    frozenset() if figures is None else figures.false_edges,
                     self.streamer.layers[mode].point_size / 2,
                 )
                 if found is not None and (best is None or found[0] < best[0]):
@@ -905,18 +909,20 @@ class CogmapApp:
                 cmap = replay.session.maps[mode]
                 mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
                         log_.frames)  # fmt: skip
-                if self._figures_key.get(mode) != mkey:
+                if self._figures_key.get(mode) != mkey or false_inputs is not None:
                     todo.append((mode, mkey, figure_inputs(log_, cmap)))
-        false_times = None if false_inputs is None else false_link_times(false_inputs, judging)
-        computed = [(mode, mkey, compute_figures(inputs, judging)) for mode, mkey, inputs in todo]
-        if false_times is None and not computed:
+        links = self._links if false_inputs is None else judge_links(false_inputs, judging)
+        computed = [
+            (mode, mkey, compute_figures(inputs, judging, links)) for mode, mkey, inputs in todo
+        ]
+        if false_inputs is None and not computed:
             return
         with replay.lock, self.scene_lock:
             if replay is not self.replay:
                 return
-            if false_times is not None:
+            if false_inputs is not None:
                 self._false_key = false_key
-                self._false_times = false_times
+                self._links = links
             for mode, mkey, figures in computed:
                 self._figures_key[mode] = mkey
                 self._figures[mode] = figures
@@ -939,11 +945,8 @@ class CogmapApp:
         truth = log_.ground_truth if len(log_.ground_truth) else None
         count = min(self.replay.cursor, len(log_.ground_truth))
         extras = {
-            mode: MapExtras(
-                self._figures[mode].truth_transform if mode in self._figures else None,
-                self._false_times,
-            )
-            for mode in MapMode
+            mode: MapExtras(figures.truth_transform, figures.false_edges)
+            for mode, figures in self._figures.items()
         }
         odometry = self._dead_reckoning() if self.streamer.show_odometry else None
         self.streamer.publish(
@@ -1024,8 +1027,13 @@ class CogmapApp:
         figures = self._figures.get(mode)
         fidelity = None if figures is None else figures.fidelity
         ate = None if figures is None else figures.ate
+        false = None if figures is None else figures.false_count
+        links = None if figures is None else figures.links
         c = cmap.counters
-        false = self.streamer.layers[mode].false_count if mode in self.streamer.layers else 0
+
+        def count(value: int | None) -> str:
+            return "–" if value is None else str(value)
+
         return {
             "vertices": str(cmap.num_vertices),
             "edges": str(cmap.num_edges),
@@ -1035,23 +1043,31 @@ class CogmapApp:
             "ate": "–" if ate is None else f"{ate:.3f}",
             "completeness": _share(None if fidelity is None else fidelity.completeness),
             "correctness": _share(None if fidelity is None else fidelity.correctness),
+            "false": count(false),
+            "links": count(None if links is None else links.links),
+            "duplicates": count(None if links is None else links.duplicates),
+            "refused_links": count(None if links is None else links.refused),
+            "made": count(None if links is None else links.made),
+            "removed": count(None if links is None else links.removed),
             "proposed": str(c.proposed),
             "declined": str(c.declined),
             "integrated": str(c.integrated),
             "short_edges": str(c.short_edges),
             "refused": str(c.refused_relocalisations),
-            "false": str(false),
         }
 
     def _update_counters(self) -> None:
         r = self.replay
         session = r.session
         t = 0.0 if math.isnan(r.frame_time) else r.frame_time
+        detected = self._loop_closures_detected()
+        false = self._links.false_before(detected)
+        judged = false_link_label(session.evaluation)
         rows = [
             ("time", "time", f"{t:.1f} / {r.duration:.1f} s"),
             ("frames", "frames", f"{r.cursor} / {r.total_frames}"),
-            ("loops-detected", "loop closures detected", str(self._loop_closures_detected())),
-            ("loops-false", "… of them false (ground truth)", str(self._false_times.size)),
+            ("loops-detected", "loop closures detected (links)", str(detected)),
+            ("loops-false", "… of them false (ground truth)", "–" if false is None else str(false)),
         ]
         n = len(ALL_MODES)
         body = "".join(
@@ -1069,6 +1085,16 @@ class CogmapApp:
                     ("loops", "loop-closure edges"),
                     ("clusters", "clusters"),
                     ("optimizations", "optimisations"),
+                ),
+            ),
+            (
+                "where the links went",
+                (
+                    ("links", "links received"),
+                    ("duplicates", "duplicates (pair already joined)"),
+                    ("refused_links", "refused by the relocalisation test"),
+                    ("made", "loop-closure edges made"),
+                    ("removed", "… of them merged or removed since"),
                 ),
             ),
             (
@@ -1099,9 +1125,16 @@ class CogmapApp:
                     f'<td id="cogmap-{m.value}-{key}">{figures[m][key]}</td>' for m in ALL_MODES
                 )
                 body += f"<tr><td>{label}</td>{cells}</tr>"
+        note = (
+            '<div class="cogmap-note" id="cogmap-counters-note">A link is false when the ground '
+            f"truth puts its two places apart ({html.escape(judged)}). <b>False loop closures "
+            "in the map</b>: the map's loop-closure edges made from a link the ground truth "
+            "calls false (as in summary.json). Links that join a pair already joined add no "
+            "edge (duplicates): on the first lap most links are.</div>"
+        )
         content = (
             f'<table class="cogmap-table" id="cogmap-counters"><thead><tr><th></th>{head}'
-            f"</tr></thead><tbody>{body}</tbody></table>"
+            f"</tr></thead><tbody>{body}</tbody></table>{note}"
         )
         if self.counters_html.content != content:
             self.counters_html.content = content
@@ -1152,9 +1185,12 @@ class CogmapApp:
         if cmap.optimizations:
             table = (
                 '<table class="cogmap-table" id="cogmap-optimizations"><thead><tr>'
-                "<th>t (s)</th><th>cluster</th><th>edges</th><th>V</th><th>iters</th>"
+                "<th>t (s)</th><th>cluster</th><th>links</th><th>V</th><th>iters</th>"
                 "<th>ms</th><th>merged</th><th>short</th></tr></thead>"
                 f"<tbody>{rows}</tbody></table>"
+                '<div class="cogmap-note">links: the loop closures the front end detected in '
+                "the cluster (the three maps share one schedule); the map keeps fewer "
+                "loop-closure edges (duplicates, refused, merged: see <i>Live</i>).</div>"
             )
         latency = ""
         last = self.replay.last_completed_rebuild()
@@ -1340,7 +1376,7 @@ class CogmapApp:
                 self._figures.clear()
                 self._figures_key.clear()
                 self._false_key = None
-                self._false_times = np.zeros(0)
+                self._links = NO_LINKS
                 self._odometry_key = None
                 self.replay = self._make_replay(  # (a bag: open_bag took it; not sniffed again)
                     path, params, speed, True, fmt="bag", opened=reader

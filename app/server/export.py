@@ -28,7 +28,7 @@ import numpy as np
 
 from app.pipeline import read_warnings, session_summary, source_description, write_sizes_csv
 from app.server.access import AccessPolicy, guarded_server
-from app.server.figures import false_link_times, truth_transform
+from app.server.figures import judge_links, map_false_edges, truth_transform
 from app.server.files import REPLAY_MARKER, is_cogmap_replay
 from app.server.scene import MapExtras, SceneStreamer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
@@ -236,7 +236,7 @@ def html_replay(
         step = max(1, math.ceil(n / max(1, keyframes)))
         pause = seconds / max(1, math.ceil(n / step))
         truth = log.ground_truth if log.has_ground_truth() else None
-        false_times = false_link_times(log, judging)
+        links = judge_links(log, judging)
         done = 0
         for k in range(step, n + step, step):
             k = min(k, n)
@@ -247,7 +247,10 @@ def html_replay(
             if k == n and finish:
                 for cmap in maps.values():
                     cmap.finish(log.frame_time[-1])
-            extras = {m: MapExtras(truth_transform(log, c), false_times) for m, c in maps.items()}
+            extras = {
+                m: MapExtras(truth_transform(log, c), map_false_edges(c, links))
+                for m, c in maps.items()
+            }
             streamer.publish(maps, truth, k, extras, duration=log.frame_time[-1])
             serializer.insert_sleep(pause)
         duration = log.frame_time[-1] - log.frame_time[0] if n else 0.0

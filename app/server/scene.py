@@ -27,17 +27,29 @@ the latest state of every node, which is what a client joining late receives.
 
 from __future__ import annotations
 
-import colorsys
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from app.palette import (
+    CLUSTER_PALETTE,
+    FALSE_LOOP_COLOR,
+    GROUND_TRUTH_COLOR,
+    MAP_COLORS,
+    ODOMETRY_COLOR,
+    PALETTE_SIZE,
+    PINNED_COLOR,
+    ROBOT_COLOR,
+    SELECTION_COLOR,
+    cluster_color,
+)
+from app.server.figures import FalseEdges, false_edge_mask
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.edge_noise import edge_information
 from cogmap_core.map_graph import MapSnapshot
@@ -49,18 +61,26 @@ UInt8Array = NDArray[np.uint8]
 #: Items (vertices, edges, path segments) per scene node.
 CHUNK = 512
 
-MAP_COLORS: dict[MapMode, tuple[int, int, int]] = {
-    MapMode.STANDARD: (52, 101, 164),
-    MapMode.SCENE_INTEGRATION: (206, 92, 0),
-    MapMode.COMPACT: (30, 140, 60),
-}
-SEQUENTIAL_COLOR = (125, 125, 125)
-GROUND_TRUTH_COLOR = (160, 160, 160)
-ODOMETRY_COLOR = (176, 122, 64)
-FALSE_LOOP_COLOR = (220, 20, 20)
-ROBOT_COLOR = (15, 15, 15)
-PINNED_COLOR = (128, 96, 170)
-SELECTION_COLOR = (255, 196, 0)
+__all__ = [  # (with the page's colours, from app.palette)
+    "CLUSTER_PALETTE",
+    "FALSE_LOOP_COLOR",
+    "GROUND_TRUTH_COLOR",
+    "MAP_COLORS",
+    "ODOMETRY_COLOR",
+    "PALETTE_SIZE",
+    "PINNED_COLOR",
+    "ROBOT_COLOR",
+    "SELECTION_COLOR",
+    "ChunkedNodes",
+    "MapExtras",
+    "MapLayer",
+    "SceneStreamer",
+    "cluster_color",
+]
+
+# The page's colours come from app.palette: one per map everywhere (sequential edges and
+# vertices in their map's colour), red only for false loop closures, checked for colour-blind
+# readers.
 
 #: Ways to colour the edges: loop closures by cluster, every edge by time, or by its error.
 COLOURINGS: tuple[str, ...] = ("cluster", "time", "error")
@@ -79,72 +99,6 @@ ROBOT_Z = 0.009
 
 #: Point size of vertices (m): a third of the typical edge length, within these bounds.
 VERTEX_SIZE_RANGE = (0.008, 0.03)
-
-_GOLDEN_ANGLE = 137.50776405003785
-#: Size of the precomputed cluster palette (later ids cycle through it).
-PALETTE_SIZE = 48
-
-
-def _lab(rgb: NDArray[np.float64]) -> NDArray[np.float64]:
-    """CIE L*a*b* of sRGB colours ``(n, 3)`` in 0..255 (D65): distances there match the eye."""
-    c = rgb / 255.0
-    c = np.where(c > 0.04045, ((c + 0.055) / 1.055) ** 2.4, c / 12.92)
-    xyz = c @ np.array(
-        [[0.4124, 0.2126, 0.0193], [0.3576, 0.7152, 0.1192], [0.1805, 0.0722, 0.9505]]
-    )
-    xyz /= np.array([0.95047, 1.0, 1.08883])
-    f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16.0 / 116.0)
-    return np.stack(
-        [116.0 * f[:, 1] - 16.0, 500.0 * (f[:, 0] - f[:, 1]), 200.0 * (f[:, 1] - f[:, 2])], 1
-    )
-
-
-def _build_palette(size: int) -> tuple[tuple[int, int, int], ...]:
-    """Saturated colours, each as far as possible (in L*a*b*) from the ones before it.
-
-    Candidates span the hue circle at several brightnesses and saturations; the colours the
-    page uses for other things (maps, sequential edges, ground truth, robot, false loop
-    closures, the selection) count as already taken, so no cluster looks like them.
-    """
-    candidates = []
-    for hue in np.arange(0.0, 360.0, 6.0):
-        for value in (0.98, 0.78, 0.58):
-            for saturation in (1.0, 0.7):
-                r, g, b = colorsys.hsv_to_rgb(hue / 360.0, saturation, value)
-                candidates.append((round(r * 255), round(g * 255), round(b * 255)))
-    cand = np.array(candidates, dtype=np.float64)
-    lab = _lab(cand)
-    taken = [
-        *MAP_COLORS.values(),
-        SEQUENTIAL_COLOR,
-        GROUND_TRUTH_COLOR,
-        ROBOT_COLOR,
-        FALSE_LOOP_COLOR,
-        SELECTION_COLOR,
-        (255, 255, 255),
-    ]
-    nearest = np.min(
-        np.linalg.norm(lab[:, None, :] - _lab(np.array(taken, float))[None], axis=2), axis=1
-    )
-    palette: list[tuple[int, int, int]] = []
-    for _ in range(size):
-        k = int(np.argmax(nearest))  # the candidate farthest from everything taken
-        palette.append((int(cand[k, 0]), int(cand[k, 1]), int(cand[k, 2])))
-        nearest = np.minimum(nearest, np.linalg.norm(lab - lab[k], axis=1))
-    return tuple(palette)
-
-
-CLUSTER_PALETTE = _build_palette(PALETTE_SIZE)
-
-
-def cluster_color(cluster_id: int) -> tuple[int, int, int]:
-    """The colour of loop-closure cluster ``cluster_id`` (:data:`CLUSTER_PALETTE`).
-
-    Consecutive clusters get very different colours, none of them grey, black or like the
-    colours of the maps, the ground truth, the robot or the false loop closures; the first
-    :data:`PALETTE_SIZE` clusters all differ (beyond, the palette repeats).
-    """
-    return CLUSTER_PALETTE[int(cluster_id) % PALETTE_SIZE]
 
 
 def cluster_colors(cluster_ids: NDArray[np.int64]) -> UInt8Array:
@@ -388,12 +342,13 @@ class MapExtras:
 
     Attributes:
         truth_transform: (theta, tx, ty) taking the ground truth onto the map (None: no truth).
-        false_edge_times: creation times of the links the ground truth calls false.
+        false_edges: the map's loop-closure edges made from links the ground truth calls false,
+            as ``(time, end vertex)`` pairs (:attr:`~app.server.figures.MapFigures.false_edges`).
 
     """
 
     truth_transform: tuple[float, float, float] | None = None
-    false_edge_times: FloatArray = field(default_factory=lambda: np.zeros(0))
+    false_edges: FalseEdges = frozenset()
 
 
 #: The layers of a map a viewer can switch on and off (frame names under ``/map/<mode>``).
@@ -532,7 +487,7 @@ class MapLayer:
         self._coloured_key: dict[str, tuple[int, tuple[int, int, int]]] = {}
         self._robot_pose: tuple[float, float, float] | None = None
         self._truth_sent: tuple[float, float, float] | None = None
-        self._false_key: tuple[int, int] | None = None
+        self._false_key: tuple[FalseEdges, int] | None = None
         self.false_count = 0
         self.extent: tuple[float, float, float, float] | None = None  # xmin, xmax, ymin, ymax
         self._segments = np.zeros((0, 2, 3), dtype=np.float32)
@@ -652,7 +607,7 @@ class MapLayer:
         m = segments.shape[0]
         if colouring == "cluster":
             colors = np.empty((m, 3), dtype=np.uint8)
-            colors[~is_loop] = SEQUENTIAL_COLOR
+            colors[~is_loop] = self.color
             colors[is_loop] = cluster_colors(snap.edge_cluster[is_loop])
         elif colouring == "time":
             colors = ramp(snap.edge_time / max(duration, 1e-9), _TIME_RAMP)
@@ -670,11 +625,9 @@ class MapLayer:
                 self.truth_frame.position = (tx, ty, 0.0)
                 self.truth_frame.wxyz = yaw_to_wxyz(theta)
             self._truth_sent = transform
-        false_key = (extras.false_edge_times.size, len(cmap.optimizations))
+        false_key = (extras.false_edges, len(cmap.optimizations))
         if changed or false_key != self._false_key:
-            snap = self._snapshot
-            is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
-            false = is_loop & np.isin(snap.edge_time, extras.false_edge_times)
+            false = false_edge_mask(self._snapshot, extras.false_edges)
             segments = self._segments[false].copy()
             segments[:, :, 2] = FALSE_LOOP_Z
             self.false_loops.sync(segments)

@@ -29,7 +29,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
-from app.server.figures import false_link_label, layout_radius_label
+from app.server.figures import FalseEdges, false_link_label, layout_radius_label
 from app.server.params import ALL_SLIDERS, format_value
 from app.server.scene import (
     COLOURINGS,
@@ -42,7 +42,6 @@ from app.server.scene import (
     ODOMETRY_COLOR,
     PINNED_COLOR,
     SELECTION_COLOR,
-    SEQUENTIAL_COLOR,
     TIME_RAMP_CSS,
     cluster_color,
     edge_error,
@@ -356,7 +355,7 @@ class ClientView:
         ]
         if s.colouring == "cluster":
             parts.append(
-                f"{swatch(SEQUENTIAL_COLOR)}sequential edges · loop-closure edges coloured by "
+                "sequential edges in their map's colour · loop-closure edges coloured by "
                 "cluster (see <i>Clusters &amp; optimisations</i>)"
             )
         elif s.colouring == "time":
@@ -709,7 +708,7 @@ def describe_vertex(cmap: CognitiveMap, snap: MapSnapshot, index: int) -> str:
 
 
 def describe_edge(
-    cmap: CognitiveMap, snap: MapSnapshot, index: int, false_times: NDArray[np.float64]
+    cmap: CognitiveMap, snap: MapSnapshot, index: int, false_edges: FalseEdges = frozenset()
 ) -> str:
     """What the page says about edge ``index`` of ``snap`` (with its residual)."""
     kind = "loop closure" if snap.edge_kind[index] == EdgeKind.LOOP_CLOSURE else "sequential"
@@ -725,7 +724,7 @@ def describe_edge(
     if kind == "loop closure":
         cid = int(snap.edge_cluster[index])
         rows.insert(3, ("cluster", f"{swatch(cluster_color(cid))}{cid}"))
-        false = bool(np.isin(snap.edge_time[index], false_times))
+        false = (float(snap.edge_time[index]), int(snap.edge_to[index])) in false_edges
         rows.append(("ground truth", "<b>false loop closure</b>" if false else "true loop closure"))
     return _info_table("edge", rows)
 
@@ -743,7 +742,7 @@ def nearest_pick(
     mode: MapMode,
     point: NDArray[np.float64],
     tolerance: float,
-    false_times: NDArray[np.float64],
+    false_edges: FalseEdges,
     vertex_radius: float = 0.0,
 ) -> tuple[float, Pick] | None:
     """The vertex or edge of ``cmap`` nearest to ``point`` within ``tolerance``.
@@ -772,7 +771,7 @@ def nearest_pick(
         gap_e = float(gap[e])
     if gap_e <= tolerance and gap_e < d[k]:
         seg = np.array([a[e], b[e]])
-        return gap_e, Pick(mode, "edge", e, describe_edge(cmap, snap, e, false_times), seg)
+        return gap_e, Pick(mode, "edge", e, describe_edge(cmap, snap, e, false_edges), seg)
     if d[k] <= tolerance:
         seg = np.array([snap.poses[k, :2], snap.poses[k, :2]])
         return float(d[k]), Pick(mode, "vertex", k, describe_vertex(cmap, snap, k), seg)
