@@ -78,7 +78,8 @@ def test_cluster_colours_are_distinct_and_neighbours_apart_for_every_vision() ->
     for k in range(n):  # clusters close in id (ids cycle) differ for every vision
         for step in range(1, CLUSTER_NEIGHBOURS + 1):
             for vision in VISIONS:
-                assert delta_e(colours[k], colours[(k + step) % n], vision) >= 20.0, (k, step)
+                d = delta_e(colours[k], colours[(k + step) % n], vision)
+                assert d >= CLUSTER_MIN_DELTA_E, (k, step, vision)
     for colour in colours:  # and no cluster looks like a map, the truth, the robot, ...
         for name, other in page_colours().items():
             for vision in VISIONS:
