@@ -154,3 +154,37 @@ def test_counters_say_where_the_links_went(false_log: Path, log_reference: SlamS
         assert "refused by the relocalisation test" in content
         view_log = app.cluster_log_html(MapMode.COMPACT, app.replay.session.maps[MapMode.COMPACT])
         assert "<th>links</th>" in view_log and "<th>edges</th>" not in view_log
+
+
+def test_the_size_chart_follows_the_replay_and_a_new_bag(
+    short_bag: Path, false_log: Path, reference: SlamSession
+) -> None:
+    """Item 1: the x axis spans the data so far (a round number above it), also in a tab open
+    during the replay; a new bag starts it again; the top y label has room."""
+    from app.server.chart import x_end
+
+    assert [x_end(t) for t in (0.0, 0.5, 3.7, 37.0, 67.2, 825.0)] == [1, 1, 4, 40, 80, 1000]
+    folders = [short_bag.parent, false_log.parent]
+    with running_app(short_bag, autoplay=False, data_dirs=folders) as app:
+        wait(app)
+        app.replay.seek(37.0)
+        wait(app)
+        until(lambda: app.chart.scales["x"]["range"] == (0.0, 40.0), 10, "x to 40 s")
+        assert max(app.chart.data[0]) == pytest.approx(app.replay.data_time, abs=1e-6)
+        app.replay.play()
+        wait(app)
+        end = reference.log.frame_time[-1]
+        until(lambda: app.chart.scales["x"]["range"] == (0.0, x_end(end)), 10, "x to the end")
+        assert app.chart.scales["y"]["range"][1] >= max(
+            reference.maps[m].num_edges for m in MapMode
+        )
+        assert app.chart.padding[0] >= 12  # room above the top y label
+        assert app.chart.axes[1]["size"] >= 60  # and left of the axis for "3,000"
+        listed = f"{false_log.parent.name}/{false_log.name}"
+        assert listed in app.refresh_bags()
+        assert app.open_bag(listed)
+        wait(app)
+        log_end = app.replay.session.log.frame_time[-1]
+        until(lambda: app.chart.scales["x"]["range"] == (0.0, x_end(log_end)), 10, "new bag")
+        assert max(app.chart.data[0]) == pytest.approx(app.replay.data_time, abs=1e-6)
+        assert max(app.chart.data[1]) == app.replay.session.maps[MapMode.STANDARD].num_vertices

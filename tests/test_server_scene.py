@@ -13,6 +13,7 @@ from app.server.scene import (
     LOOP_Z,
     MAP_COLORS,
     SEQUENTIAL_Z,
+    VERTEX_FRACTION,
     ChunkedNodes,
     MapExtras,
     MapLayer,
@@ -22,6 +23,7 @@ from app.server.scene import (
     edge_error,
     edge_errors,
     edge_segments,
+    nice,
 )
 from app.server.view import describe_edge
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
@@ -110,6 +112,13 @@ def circle_events(vertices: int, laps: int = 2, start: int = 0) -> list[MapEvent
         if k >= per_lap and k % 10 == 0:
             events.append(LinkToVertex(t, k % per_lap, 0.0))
     return events
+
+
+def _scaled(event: MapEvent, factor: float) -> MapEvent:
+    """``event`` with its odometry's translation scaled (a map ``factor`` times as large)."""
+    if isinstance(event, Odometry):
+        return Odometry(event.time, event.translation * factor, event.rotation)
+    return event
 
 
 @pytest.fixture
@@ -250,13 +259,25 @@ def test_false_loop_closures_truth_alignment_and_vertex_size(server: viser.Viser
     assert tuple(layer.truth_frame.position) == (1.0, -2.0, 0.0)
     w, x, y, z = layer.truth_frame.wxyz
     assert np.isclose(2 * np.arctan2(z, w), 0.3)
-    # dense maps get small vertices (a third of the typical edge), sparse ones the largest
-    assert layer.point_size == pytest.approx(round(14.0 / 400 / 3 / 0.002) * 0.002)
+    # vertices are sized by the extent mapped (issue 25: a 4.5 m circle), not by the map's
+    # density (which the parameters change): a dense and a sparse map of it alike
+    extent = layer.extent
+    assert extent is not None and extent[1] - extent[0] == pytest.approx(4.46, abs=0.05)
+    span = max(extent[1] - extent[0], extent[3] - extent[2])
+    assert layer.point_size == streamer.marker == nice(span * VERTEX_FRACTION) == 0.015
     sparse = CognitiveMap(MapMode.STANDARD)
     sparse.apply_all(circle_events(40, laps=1))
     streamer.show((MapMode.COMPACT,))
     streamer.publish({MapMode.COMPACT: sparse})
-    assert streamer.layers[MapMode.COMPACT].point_size == 0.03
+    assert streamer.layers[MapMode.COMPACT].point_size == layer.point_size
+    # ten times the extent, ten times the size (both rounded); the robot's arrow follows
+    big = SceneStreamer(server)
+    wide = CognitiveMap(MapMode.STANDARD)
+    wide.apply_all([_scaled(e, 10.0) for e in circle_events(200, laps=1)])
+    big.show((MapMode.STANDARD,))
+    big.publish({MapMode.STANDARD: wide})
+    assert big.marker == pytest.approx(10 * layer.point_size, rel=0.34)
+    assert big.layers[MapMode.STANDARD].point_size == big.marker
 
 
 def test_one_edges_residual_is_the_whole_graphs_to_the_last_bit(

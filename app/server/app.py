@@ -33,7 +33,7 @@ import viser
 import viser.uplot
 
 from app.server.assets import head_html, help_markdown
-from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, y_top
+from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, x_end, y_top
 from app.server.export import (
     default_replay_name,
     g2o_bytes,
@@ -91,7 +91,7 @@ from cogmap_core.event_file import KIND_LINK
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, EventLog, SlamSession
-from cogmap_core.sources.detect import KINDS, LogOptions, Source
+from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -107,6 +107,8 @@ SPEEDS: dict[str, float] = {
     "20x": 20.0,
     "max": math.inf,
 }
+#: The smallest extent the scene's sizes and framing are chosen for, in layout radii.
+SPAN_PER_RADIUS = 40.0
 #: A viewer joining after this much data was replayed is told so (s).
 LATE_JOIN_S = 5.0
 RECENT_LINKS = 8
@@ -422,16 +424,15 @@ class CogmapApp:
         self.sizes_button.on_click(lambda event: self._download(event.client, "sizes"))
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
-        with gui.add_folder("Open another bag — shared", expand_by_default=False):
+        with gui.add_folder("Open another bag or log — shared", expand_by_default=False):
             names = self._list_bags()
-            self.bag_dropdown = gui.add_dropdown(
-                "bag", names, initial_value=names[0], hint="the bags in the server's data folders"
-            )
+            self.bag_dropdown = gui.add_dropdown("bag or log", names, initial_value=names[0])
             self.refresh_button = gui.add_button("refresh the list", icon=viser.Icon.REFRESH)
             self.open_button = gui.add_button("open", icon=viser.Icon.FOLDER_OPEN)
             self.open_md = gui.add_html(
-                '<div class="cogmap-note" id="cogmap-open">A bag of the data folders; the '
-                "replay starts over with it, for everyone.</div>"
+                '<div class="cogmap-note" id="cogmap-open">A bag, or a log of odometry and place '
+                "recognition (TUC or CSV), of the server's data folders; the replay starts over "
+                "with it, for everyone.</div>"
             )
         self.refresh_button.on_click(lambda _: self.refresh_bags())
         self.open_button.on_click(lambda _: self._open_chosen())
@@ -849,7 +850,8 @@ class CogmapApp:
             try:
                 view.refresh()
             except Exception:  # a tab that went away must not stop the others
-                traceback.print_exc()
+                if not view.closed and self._connected(view.client):
+                    traceback.print_exc()
 
     # ------------------------------------------------------------------ page content
     def _update_figures(self, forced: bool, modes: tuple[MapMode, ...]) -> None:
@@ -942,6 +944,9 @@ class CogmapApp:
     def _publish_scene(self) -> None:
         session = self.replay.session
         log_ = session.log
+        # sizes, the grid and the framing suit the kind of input: a maze (8 cm layout radius:
+        # at least 3.2 m) or a building (50 cm: at least 20 m)
+        self.streamer.min_span = SPAN_PER_RADIUS * session.evaluation.layout_radius
         truth = log_.ground_truth if len(log_.ground_truth) else None
         count = min(self.replay.cursor, len(log_.ground_truth))
         extras = {
@@ -1143,9 +1148,11 @@ class CogmapApp:
         maps = dict(self.replay.session.maps.maps)
         data = chart_data(maps, self.replay.data_time)  # session time (bag time unless resuming)
         top = y_top(max(float(np.max(series)) for series in data[SIZE_SERIES]))
+        end = x_end(float(data[0][-1]))
         with self.server.atomic():
-            if self.chart.scales != chart_options(top)["scales"]:
-                self.chart.scales = chart_options(top)["scales"]  # type: ignore[assignment]
+            scales = chart_options(top, end)["scales"]
+            if self.chart.scales != scales:
+                self.chart.scales = scales  # type: ignore[assignment]
             self.chart.data = data
             series = chart_series(maps)
             if tuple(self.chart.series) != series:
@@ -1325,12 +1332,14 @@ class CogmapApp:
         return thread
 
     def open_bag(self, name: str) -> bool:
-        """Replay the bag listed as ``name`` (in the data folders) instead; errors go to the page.
+        """Replay the bag or log listed as ``name`` (in the data folders); errors go to the page.
 
         Only the names of :meth:`refresh_bags`' list are opened; anything else -- a path, a
         missing file, a folder -- gets the same one line. The file is checked again (a regular
         file inside its folder, not too large) and opened by its resolved path, then checked
-        (a bag, with camera frames) before the current replay is replaced.
+        (a bag with camera frames, or a log of odometry and place recognition read whole, as
+        ``cogmap serve FILE`` reads it) before the current replay is replaced. A bag after a
+        log (or a log after a bag) starts from its kind's default parameters.
         """
         chosen = self._bags.get(name)
         if chosen is None:
@@ -1345,12 +1354,20 @@ class CogmapApp:
         reader = None
         # opened once here, to refuse it before the running replay stops (the reader names what
         # is wrong: neither a ROS 1 bag nor a ROS 2 bag, ...), then handed over to the new replay
+        log_options = LogOptions()
         try:
             chosen = self.data.check(chosen)
-            reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
+            if chosen.kind == "bag":
+                reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
+            else:  # a log: read (and checked) whole, as cogmap serve FILE reads it
+                reader = open_source(chosen.path, chosen.kind, log=log_options)
             frames = reader.info.frame_count
             if frames == 0:
-                problem = f"{name} has no camera frames on the image topic"
+                problem = (
+                    f"{name} has no camera frames on the image topic"
+                    if chosen.kind == "bag"
+                    else f"{name} has no odometry to map"
+                )
         except CogmapError as exc:
             problem = self.scrubber.scrub(str(exc))
         except Exception as exc:
@@ -1363,13 +1380,14 @@ class CogmapApp:
             return False
         assert reader is not None
         path = chosen.path
+        kind = KINDS[chosen.kind]
         with self._switch_lock:
             old = self.replay
             params = old.params
             speed = old.speed
-            from_log = not old.has_camera
-            if from_log:  # a log's map parameters are not a bag's: start from the bag's own
-                params = self.defaults = KINDS["bag"].map_params
+            switched = kind.has_camera != old.has_camera
+            if switched:  # a log's map parameters are not a bag's: start from the kind's own
+                params = self.defaults = kind.map_params
             old.stop()  # joins its worker, which may be waiting for the replay lock
             with self._replay_lock, self.scene_lock:
                 self.streamer.reset()
@@ -1378,17 +1396,18 @@ class CogmapApp:
                 self._false_key = None
                 self._links = NO_LINKS
                 self._odometry_key = None
-                self.replay = self._make_replay(  # (a bag: open_bag took it; not sniffed again)
-                    path, params, speed, True, fmt="bag", opened=reader
+                self.replay = self._make_replay(  # (opened here: not sniffed again)
+                    path, params, speed, True, fmt=chosen.kind, log=log_options, opened=reader
                 )
                 self.started_at = time.monotonic()
                 self.links_html.content = ""  # (a log's latest links)
             self.views_changed()
             self.replay.start()
-        if from_log:
+        if switched:
             self.reset_button.label = self._reset_label()
-            self.reset_params()  # the sliders show the bag's defaults (no rebuild: in use)
-        self._open_message(f"opened {name} ({frames} frames); replaying it for everyone")
+            self.reset_params()  # the sliders show the kind's defaults (no rebuild: in use)
+        what = "frames" if kind.has_camera else "steps"
+        self._open_message(f"opened {name} ({frames} {what}); replaying it for everyone")
         self._sync_play_button()
         return True
 
