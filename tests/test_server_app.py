@@ -12,6 +12,7 @@ import csv
 import html
 import io
 import json
+import math
 import threading
 import time
 import urllib.request
@@ -304,11 +305,12 @@ def test_seek_and_restart_replay_from_the_cache(short_bag: Path, reference: Slam
         wait(app)
         assert app.replay.state is PlaybackState.ENDED
         assert app.seek_slider.value == round(reference.log.frame_time[-1], 1)  # follows
+        # restart plays from the start (issue 25: it used to leave playback paused at frame 0)
+        app.replay.set_speed(20.0)
         app.restart_button.value = True  # a click
-        wait(app)
-        assert app.replay.cursor == 0 and app.replay.state is PlaybackState.PAUSED
-        assert app.streamer.layers[MapMode.COMPACT].vertices.num_items == 0
-        app.play_button.value = True
+        until(lambda: app.replay.state is PlaybackState.PLAYING, 10, "playing from the start")
+        assert app.replay.cursor < reference.log.frames // 2
+        app.replay.set_speed(math.inf)
         wait(app)
         assert app.replay.state is PlaybackState.ENDED
         for mode in MapMode:

@@ -55,6 +55,7 @@ from app.server.figures import (
     layout_radius_label,
 )
 from app.server.files import DataFile, DataFolders, ExportFolder, Scrubber, default_export_dir
+from app.server.network import ACTIVITY_FLOOR, match_text, pose_cell_image, template_image
 from app.server.params import (
     ADVANCED_SLIDERS,
     ALL_SLIDERS,
@@ -232,6 +233,9 @@ class CogmapApp:
         self._image_limit = _RateLimit(scene_hz)
         self._chart_limit = _RateLimit(1.0)
         self._figures_limit = _RateLimit(1.0)
+        self._pose_cells_limit = _RateLimit(4.0)
+        self._rebuild_shown: tuple[MapParams, tuple[MapMode, ...]] | None = None
+        self._state_shown: PlaybackState | None = None
         self._views_limit = _RateLimit(2.0)
         self._figures: dict[MapMode, MapFigures] = {}
         self._figures_key: dict[MapMode, tuple[int, ...]] = {}
@@ -243,7 +247,7 @@ class CogmapApp:
         # set while the app itself sets a control (per thread: viser runs callbacks on a
         # pool, and another viewer's change must not be swallowed meanwhile)
         self._setting = threading.local()
-        self._pending_frame: tuple[Frame, int | None] | None = None
+        self._pending_frame: tuple[Frame | EventStep, int | None, int] | None = None
         self.status_note = ""
         self._typed: dict[str, tuple[str, str]] = {}  # box -> (normal text, message)
         self._default_modes: tuple[MapMode, ...] = (MapMode.COMPACT,)
@@ -348,8 +352,9 @@ class CogmapApp:
         self.head_html = gui.add_html(head_html(self.static_dir))
         self.status_html = gui.add_html(self._status_content())
 
-        self.view_folder = gui.add_folder("View — yours")
+        # what a click picked comes first: it shows next to the map, never below the fold
         self.inspect_folder = gui.add_folder("Inspect — yours")
+        self.view_folder = gui.add_folder("View — yours")
         self.compare_folder = gui.add_folder("Compare with a pinned map — yours")
 
         with gui.add_folder("Playback — shared"):
@@ -369,7 +374,7 @@ class CogmapApp:
         self.play_button.on_click(lambda _: self._toggle_play())
         self.speed_dropdown.on_update(lambda _: self._on_speed())
         self.step_button.on_click(lambda _: self.replay.step())
-        self.restart_button.on_click(lambda _: self.replay.restart())
+        self.restart_button.on_click(lambda _: self.restart())
         self.seek_slider.on_update(lambda _: self._on_seek())
         self.seek_box.on_update(lambda _: self._on_seek_box())
 
@@ -379,7 +384,23 @@ class CogmapApp:
             )
             self.template_md = gui.add_markdown("view template: –")
             self.links_html = gui.add_html("")  # logs: the latest links and their scores
+            self.built_html = gui.add_html("")  # what the maps were built with; a rebuild
             self.counters_html = gui.add_html("")
+
+        with gui.add_folder("Network behind the map — shared"):
+            self.network_html = gui.add_html(
+                '<div class="cogmap-note" id="cogmap-network">The front end\'s view templates '
+                "and pose cells show when the replay runs.</div>"
+            )
+            self.template_image = gui.add_image(
+                np.full((20, 60, 3), 255, np.uint8), label="current view · matched template",
+                format="png",
+            )  # fmt: skip
+            self.match_html = gui.add_html("")
+            self.pose_cells_image = gui.add_image(
+                np.full((30, 42, 3), 255, np.uint8), label="pose cells (x, y, θ)", format="jpeg"
+            )
+            self.pose_cells_html = gui.add_html("")
 
         with gui.add_folder("Map parameters — shared"):
             self.param_sliders: dict[str, viser.GuiSliderHandle[float]] = {}
@@ -778,13 +799,19 @@ class CogmapApp:
 
     # ================================================================== listener (worker thread)
     def on_status(self, replay: Replay) -> None:
-        """Playback state changed (rate-limited except for state changes)."""
-        if self._status_limit.due(forced=replay.state is not PlaybackState.PLAYING):
+        """Playback state changed (rate-limited except for state changes and rebuilds)."""
+        rebuilding = replay.rebuilding
+        forced = (
+            replay.state is not PlaybackState.PLAYING
+            or replay.state is not self._state_shown
+            or rebuilding != self._rebuild_shown
+        )
+        if self._status_limit.due(forced=forced):
             self._update_status()
 
     def on_frame(self, replay: Replay, frame: Frame | EventStep, view_template: int | None) -> None:
         """Show the camera image (rate-limited; the latest one is shown when playback stops)."""
-        self._pending_frame = (frame, view_template)
+        self._pending_frame = (frame, view_template, replay.cursor - 1)
         if self._image_limit.due(not replay.playing):
             self._show_frame()
 
@@ -793,24 +820,90 @@ class CogmapApp:
         if pending is None:
             return
         self._pending_frame = None
-        frame, view_template = pending
+        frame, view_template, index = pending
         if isinstance(frame, EventStep):  # a log: no camera; the latest links' scores instead
             self._show_links(frame)
             return
         r = self.replay
-        if not self.camera_image.visible:  # (hidden while a log was replayed)
-            self.camera_image.visible = True
+        for handle in (self.camera_image, self.template_image):
+            if not handle.visible:  # (hidden while a log was replayed)
+                handle.visible = True
         self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
-            f"view template **{template}** · frame {r.cursor} / {r.total_frames} · "
+            f"view template **{template}** · frame {index + 1} / {r.total_frames} · "
             f"t = {frame.time:.2f} s"
+        )
+        self._show_network(frame, view_template, index)
+
+    def _show_network(self, frame: Frame, view_template: int | None, index: int) -> None:
+        """The view template panel and the pose cells (as OpenRatSLAM shows them)."""
+        r = self.replay
+        frontend = r.session.frontend
+        local_view = frontend.local_view
+        current = local_view.make_template(frame.image)
+        matched = None
+        if view_template is not None and 0 <= view_template < local_view.count:
+            matched = local_view.template(view_template)
+        self.template_image.image = template_image(current, matched)
+        k = index - r.base_frames
+        error = r.view_errors[k] if 0 <= k < len(r.view_errors) else math.nan
+        threshold = frontend.config.vt_match_threshold
+        text = match_text(view_template, None if math.isnan(error) else error, threshold,
+                          math.isnan(error))  # fmt: skip
+        self.match_html.content = (
+            f'<div class="cogmap-note" id="cogmap-match">{html.escape(text)} '
+            f"({local_view.count} templates stored)</div>"
+        )
+        note = (
+            '<div class="cogmap-note" id="cogmap-network">Left: the camera image as the local '
+            "view cells see it (cropped, resampled, normalised); right: the view template it "
+            "matched.</div>"
+        )
+        if self.network_html.content != note:
+            self.network_html.content = note
+        processed = r.session.log.frames
+        if index + 1 < processed:  # replaying cached events: the front end is further on
+            if self.pose_cells_image.visible:
+                self.pose_cells_image.visible = False
+            self.pose_cells_html.content = (
+                '<div class="cogmap-note" id="cogmap-pose-cells">Pose cells: the front end last '
+                f"ran at frame {processed}; this frame replays its cached events. They show "
+                "again once playback passes that frame.</div>"
+            )
+            return
+        if not self._pose_cells_limit.due(not r.playing):
+            return
+        activity = frontend.pose_cell_activity
+        peak = frontend.pose_cell_peak
+        if not self.pose_cells_image.visible:
+            self.pose_cells_image.visible = True
+        self.pose_cells_image.image = pose_cell_image(activity, peak)
+        n_th = activity.shape[0]
+        x, y, th = peak
+        self.pose_cells_html.content = (
+            '<div class="cogmap-note" id="cogmap-pose-cells">Activity of the '
+            f"{activity.shape[2]} × {activity.shape[1]} × {n_th} pose-cell network at frame "
+            f"{index + 1} (dots: cells above {ACTIVITY_FLOOR:.0%} of the peak, larger and "
+            f"yellower when stronger); peak (ring) at x {x:.1f}, y {y:.1f}, θ {th:.1f} cells "
+            f"({math.degrees(th * 2 * math.pi / n_th):.0f}°).</div>"
         )
 
     def _show_links(self, step: EventStep) -> None:
         """Hide the camera panel; list the latest place-recognition links with their scores."""
-        if self.camera_image.visible:
-            self.camera_image.visible = False
+        for handle in (self.camera_image, self.template_image, self.pose_cells_image):
+            if handle.visible:
+                handle.visible = False
+        note = (
+            '<div class="cogmap-note" id="cogmap-network">No camera: this input is a log of '
+            "odometry and place recognition, whose links come as they are. There is no front end "
+            "here (no view templates, no pose cells); the latest links are under "
+            "<i>Live</i>.</div>"
+        )
+        if self.network_html.content != note:
+            self.network_html.content = note
+            self.match_html.content = ""
+            self.pose_cells_html.content = ""
         with self.replay.lock:
             recent = recent_links(self.replay.session.log, self.replay.cursor, RECENT_LINKS)
         rows = "".join(
@@ -995,9 +1088,13 @@ class CogmapApp:
         )
 
     def _update_status(self, force: bool = False) -> None:
+        self._state_shown = self.replay.state
         content = self._status_content()
         if self.status_html.content != content:
             self.status_html.content = content
+        built = self._built_content()
+        if self.built_html.content != built:
+            self.built_html.content = built
         r = self.replay
         if r.duration > 0 and self.seek_slider.max != round(r.duration, 1):
             self.seek_slider.max = round(r.duration, 1)
@@ -1020,6 +1117,54 @@ class CogmapApp:
             finally:
                 self._setting.seek = False
         self._sync_play_button()
+
+    def _built_content(self) -> str:
+        """What the shown maps were built with, and which are being rebuilt (for what)."""
+        r = self.replay
+        rebuilding = r.rebuilding
+        self._rebuild_shown = rebuilding
+        maps = r.session.maps.maps
+        groups: dict[MapParams, list[str]] = {}
+        for mode in ALL_MODES:
+            if mode in maps:
+                groups.setdefault(maps[mode].params, []).append(mode.value.replace("_", " "))
+
+        def described(params: MapParams) -> str:
+            return " · ".join(
+                f"{spec.label} {format_value(getattr(params, spec.name))}" for spec in ALL_SLIDERS
+            )
+
+        if len(groups) == 1:
+            lines = [f"<b>maps built with</b> {html.escape(described(next(iter(groups))))}"]
+        else:
+            lines = [
+                f"<b>{', '.join(names)} built with</b> {html.escape(described(params))}"
+                for params, names in groups.items()
+            ]
+        content = '<div class="cogmap-note" id="cogmap-built">' + "<br>".join(lines) + "</div>"
+        if rebuilding is not None:
+            params, pending = rebuilding
+            changes = []
+            for spec in ALL_SLIDERS:
+                olds = {getattr(maps[m].params, spec.name) for m in pending if m in maps}
+                new = getattr(params, spec.name)
+                if olds and olds != {new}:
+                    was = ", ".join(format_value(v) for v in sorted(olds))
+                    changes.append(f"{spec.label} = {format_value(new)} (was {was})")
+            names = ", ".join(m.value.replace("_", " ") for m in pending)
+            what = "; ".join(changes) or "the new parameters"
+            content = (
+                '<div class="cogmap-note cogmap-busy" id="cogmap-rebuild">rebuilding '
+                f"{html.escape(names)} for {html.escape(what)} …</div>" + content
+            )
+        return content
+
+    def restart(self) -> None:
+        """Back to the first frame and play (the restart button; after the end as before it)."""
+        self.replay.restart()
+        self.replay.play()
+        self._sync_play_button()
+        self._update_status(force=True)
 
     def _loop_closures_detected(self) -> int:
         log_ = self.replay.session.log
