@@ -349,6 +349,10 @@ class CogmapApp:
             brand_color=(30, 140, 60),
         )
         gui.set_panel_label("cogmap · compact cognitive map")
+        # docked at the right: the scene's canvas ends where the panel begins, so nothing of the
+        # map lies under the panel, whatever the window, the screen's pixel ratio or the
+        # resolution viser renders at (a floating panel covered a part nobody could compute)
+        gui.main_panel.dock_right()
         self.head_html = gui.add_html(head_html(self.static_dir))
         self.status_html = gui.add_html(self._status_content())
 
@@ -1548,6 +1552,8 @@ class CogmapApp:
                 self.links_html.content = ""  # (a log's latest links)
             self.views_changed()
             self.replay.start()
+        for view in list(self.views.values()):  # what a tab picked was the old input's
+            view.select(None)
         if switched:
             self.reset_button.label = self._reset_label()
             self.reset_params()  # the sliders show the kind's defaults (no rebuild: in use)

@@ -486,22 +486,22 @@ class MapLayer:
 
             return make
 
+        # A node made with one colour keeps it: only its points are replaced. (viser's browser
+        # side does not switch a line material from one colour to per-vertex colours: red false
+        # loop closures updated that way were drawn white.)
         def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> None:
             with server.atomic():
                 handle.points = part
-                handle.colors = np.broadcast_to(
-                    np.array(self.color, np.uint8), (part.shape[0], 3)
-                ).copy()
                 if handle.point_size != self.point_size:
                     handle.point_size = self.point_size
 
         def move_segments(color: tuple[int, int, int] | None) -> NodeUpdater:
             def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> None:
-                if cols is None:
-                    cols = np.broadcast_to(np.array(color, np.uint8), part.shape).copy()
                 with server.atomic():
                     handle.points = part
-                    handle.colors = cols
+                    if color is None:  # (made with per-vertex colours: replaced alike)
+                        assert cols is not None
+                        handle.colors = cols
 
             return update
 

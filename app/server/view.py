@@ -83,10 +83,9 @@ PIN_DISPLAYS: tuple[str, ...] = ("beside", "under")
 warnings.filterwarnings(
     "ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning
 )
-#: The control panel's width on the page (px), left out when the camera frames the maps.
-PANEL_PX = 430
-#: Margin kept free around what the camera frames (px): the axes gizmo at the bottom left.
-MARGIN_PX = 70
+#: Margin kept free around what the camera frames, as a share of the canvas's height (the axes
+#: gizmo at the bottom left). The control panel is docked beside the canvas, not over it.
+MARGIN = 0.07
 #: The plan view (the default): the camera looks straight down, north (+y) up, from far away
 #: through a narrow field of view -- viser has no orthographic camera, and at 3 degrees a
 #: perspective camera draws the flat map at one scale to within 0.1 %.
@@ -326,6 +325,17 @@ class ClientView:
                 )
         return out
 
+    def _place(self) -> None:
+        """Shift the shown maps (and the pinned one) to where :meth:`offsets` has them now."""
+        offsets = self.offsets()
+        with self.client.atomic():
+            for mode in self.state.shown:
+                self._shadow(f"/map/{mode.value}", True, offsets[mode.value])
+            if self._pinned_frame is not None:
+                position = (offsets.get("pinned", 0.0), 0.0, -0.002)
+                if tuple(self._pinned_frame.position) != position:
+                    self._pinned_frame.position = position
+
     def update_grid(self) -> None:
         """Lay this tab's grid under everything it shows (maps side by side, the pinned one)."""
         content = self.content_extent()
@@ -474,18 +484,17 @@ class ClientView:
             width = camera.image_width or 1280
             height = camera.image_height or 800
             fov = PLAN_FOV if top else VIEW_FOV
-            usable_w = max(0.35 * width, width - PANEL_PX - 2 * MARGIN_PX)
-            usable_h = max(0.5 * height, height - 2 * MARGIN_PX)
+            # (the canvas's size in its own pixels, whatever their size on the screen: only the
+            # ratio of the two matters)
+            margin = MARGIN * height
+            usable_w = max(0.5 * width, width - 2 * margin)
+            usable_h = max(0.5 * height, height - 2 * margin)
             x0, x1, y0, y1 = box
             w, h = max(x1 - x0, 0.5), max(y1 - y0, 0.5)
             tan = math.tan(fov / 2.0)
             # the vertical field spans `height` pixels at 2 d tan(fov / 2) metres
             distance = max(h * height / usable_h, w * height / usable_w) / (2.0 * tan)
-            metres_per_px = 2.0 * distance * tan / height
-            # the content's centre goes to the middle of the free part of the canvas
-            free_centre = (width - PANEL_PX) / 2.0 if usable_w > 0.35 * width else width / 2.0
-            shift = (width / 2.0 - free_centre) * metres_per_px
-            cx = (x0 + x1) / 2 + shift
+            cx = (x0 + x1) / 2
             cy = (y0 + y1) / 2
             if top:
                 position = (cx, cy - 1e-4 * distance, distance)
@@ -581,6 +590,7 @@ class ClientView:
                     self._compare_key = ckey
                     self.compare_html.content = self._compare_table(cmap)
             with self._lock:
+                self._place()  # the maps grow: side by side they stay clear of each other
                 self.update_grid()
                 legend = self._legend()
                 if self.legend_html.content != legend:
