@@ -124,7 +124,8 @@ def size_figure(histories: Histories, end_time: float) -> Figure:
             ax.set_xlabel("data time (s)")
             ax.set_ylabel(f"number of {title}")
             ax.set_title(f"{title} of each map")
-        axes[0].legend(loc="upper left", frameon=False)
+        if histories:
+            axes[0].legend(loc="upper left", frameon=False)
         return figure
 
     return styled(draw)

@@ -107,7 +107,8 @@ def test_restart_after_the_end_plays_from_the_start(short_bag: Path) -> None:
         app.replay.set_speed(5.0)
         app.restart_button.value = True  # a click
         until(lambda: app.replay.state is PlaybackState.PLAYING, 10, "playing again")
-        assert app.replay.cursor < 60 and app.play_button.label == "pause"
+        assert app.replay.cursor < 60
+        until(lambda: app.play_button.label == "pause", 5, "the button saying pause")
 
 
 def test_the_network_behind_the_map(short_bag: Path, reference: SlamSession) -> None:
