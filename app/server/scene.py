@@ -807,10 +807,12 @@ class Grid:
         x0, x1, y0, y1 = content
         section, cell = grid_spacing(max(span or 0.0, span_of(content), 1e-3))
         self.section, self.cell = section, cell
-        gx0 = math.floor(x0 / section) * section - section
-        gx1 = math.ceil(x1 / section) * section + section
-        gy0 = math.floor(y0 / section) * section - 2 * section
-        gy1 = math.ceil(y1 / section) * section + section
+        # beyond the content by most of its size: the canvas is filled whatever its shape
+        pad = max(section, 0.8 * span_of(content))
+        gx0 = math.floor((x0 - pad) / section) * section
+        gx1 = math.ceil((x1 + pad) / section) * section
+        gy0 = math.floor((y0 - pad) / section) * section
+        gy1 = math.ceil((y1 + pad) / section) * section
         bar_y = y0 - 0.6 * section
         bar = (x1 - section, bar_y)
         box = (gx0, gx1, gy0, gy1)
