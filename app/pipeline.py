@@ -20,8 +20,8 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from app.plots import map_figure, save_png, size_figure
 from app.report import ReportFolder
+from app.report_figures import map_figure, save_figure, size_figure
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import BagReader, BagTopics
@@ -31,6 +31,8 @@ from cogmap_core.errors import CogmapError, InputFileError
 from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
     MapAccuracy,
+    false_loop_edges,
+    loop_edge_links,
     map_accuracy,
 )
 from cogmap_core.event_file import save_event_file
@@ -41,7 +43,12 @@ from cogmap_core.g2o import write_g2o
 from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
-from cogmap_core.slam import SlamSession, optimisation_summary
+from cogmap_core.slam import (
+    SlamSession,
+    link_resolution,
+    map_false_loop_edges,
+    optimisation_summary,
+)
 from cogmap_core.sources.detect import (
     KINDS,
     CameraOptions,
@@ -63,7 +70,9 @@ REPORT_FILES: tuple[str, ...] = (
     "trajectory_tum.txt",
     "groundtruth_tum.txt",
     "size.png",
+    "size.svg",
     "map.png",
+    "map.svg",
 )
 ProgressCallback = Callable[[int, int, float], None]
 
@@ -244,6 +253,9 @@ def session_summary(
         entry["short_edges_removed"] = c.short_edges
         entry["duplicate_links"] = c.duplicate_links
         entry["refused_relocalisations"] = c.refused_relocalisations
+        # loop-closure edges of the map made from a link the ground truth calls false (the
+        # page's "false loop closures in the map"; None without ground truth)
+        entry["false_loop_edges"] = map_false_loop_edges(session.log, cmap, judging, final.snapshot)
         entries[mode.value] = entry
     score = session.loop_closure_score()
     links = session.log.link_table()
@@ -632,28 +644,48 @@ class HeadlessPipeline:
         summary: dict[str, Any],
         maps: Mapping[MapMode, FinalMap],
     ) -> None:
-        histories = {m.value: self.session.maps[m].size_history() for m in MAP_ORDER}
-        save_png(size_figure(histories, end_time), report.path("size.png"))
-        snaps = {m.value: maps[m].snapshot for m in MAP_ORDER}
-        aligned: dict[str, np.ndarray] = {}
+        histories = {m: self.session.maps[m].size_history() for m in MAP_ORDER}
+        png = report.path("size.png")
+        report.path("size.svg")  # (written beside the PNG)
+        save_figure(size_figure(histories, end_time), png)
+        snaps = {m: maps[m].snapshot for m in MAP_ORDER}
+        aligned: dict[MapMode, np.ndarray] = {}
+        false: dict[MapMode, np.ndarray] = {}
         truth_path = None
-        if self.session.log.has_ground_truth():
-            truth_path = np.asarray(self.session.log.ground_truth)
+        log = self.session.log
+        if log.has_ground_truth():
+            truth_path = np.asarray(log.ground_truth)
+            judging = self.session.evaluation
+            links = log.link_table()
+            false_links = log.false_links(judging.loop_distance, judging.loop_heading)
             for mode in MAP_ORDER:
                 accuracy = maps[mode].accuracy
-                snap = snaps[mode.value]
+                snap = snaps[mode]
                 if accuracy is not None and accuracy.alignment is not None:
                     poses = snap.poses.copy()
                     poses[:, :2] = accuracy.alignment.apply(snap.poses[:, :2])
-                    aligned[mode.value] = poses
+                    aligned[mode] = poses
+                if false_links is not None:
+                    alias, refused = link_resolution(maps[mode].cmap)
+                    made = loop_edge_links(
+                        np.array([t for t, _, _ in links]),
+                        np.array([g for _, g, _ in links], dtype=np.int64),
+                        snap,
+                        alias,
+                        refused,
+                    )
+                    false[mode] = false_loop_edges(made, false_links)
         notes = {}
-        for name, entry in summary["maps"].items():
+        for mode in MAP_ORDER:
+            entry = summary["maps"][mode.value]
             if entry.get("completeness") is not None:  # (a figure may be None: "-")
-                notes[name] = (
-                    f"ATE {_figure(entry['ate_m'])} m, completeness "
+                notes[mode] = (
+                    f"ATE {_figure(entry['ate_m'])} m\ncompleteness "
                     f"{_figure(entry['completeness'])}, correctness {_figure(entry['correctness'])}"
                 )
-        save_png(map_figure(truth_path, snaps, aligned, notes), report.path("map.png"))
+        png = report.path("map.png")
+        report.path("map.svg")
+        save_figure(map_figure(truth_path, snaps, aligned, notes, false), png)
 
 
 def run_headless(

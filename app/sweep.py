@@ -11,7 +11,7 @@ A sweep folder ``DIR`` holds
 - ``results.csv`` -- one row per finished cell, appended (and flushed to disk) the moment the
   cell finishes: a cell's settings, its figures or its error, the run that computed it and the
   worker. Re-running the same command reads it and computes only the cells without a good row;
-- ``pareto.png`` and ``best.json`` -- written when every cell has a row.
+- ``pareto.png`` (with ``pareto.svg``) and ``best.json`` -- written when every cell has a row.
 
 Cells run on ``dask.distributed``: a local cluster sized to the machine (one single-threaded
 worker process per core: the map build holds the GIL) or an existing cluster
@@ -41,12 +41,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-import cv2
-import numpy as np
-
 from app.params_file import BEST_FORMAT
-from app.plots import BLACK, FONT, Panel, save_png
 from app.progress import ProgressBar
+from app.report_figures import save_figure
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -1221,9 +1218,8 @@ class Sweep:
         best = self._best(setting_figures, len(failed))
         write_json(self.out_dir / BEST_FILE, best)
         self.files.append(self.out_dir / BEST_FILE)
-        image = pareto_figure(best, list(setting_figures.values()), self._title(len(failed)))
-        save_png(image, self.out_dir / PARETO_FILE)
-        self.files.append(self.out_dir / PARETO_FILE)
+        figure = pareto_figure(best, list(setting_figures.values()), self._title(len(failed)))
+        self.files += save_figure(figure, self.out_dir / PARETO_FILE)  # and pareto.svg
         result = SweepResult(
             self.out_dir, len(self.cells), computed, skipped, len(failed), best, list(self.files)
         )
@@ -1287,94 +1283,24 @@ class Sweep:
 
 
 # --------------------------------------------------------------------------- the figure
-FRONT_COLOR = (40, 40, 220)  # BGR red
-PAPER_COLOR = (200, 110, 30)  # blue
-BEST_COLOR = (40, 160, 40)  # green
-POINT_COLOR = (170, 170, 170)
-
-
-def pareto_figure(
-    best: Mapping[str, Any], settings: Sequence[SettingFigures], title: str
-) -> np.ndarray:
+def pareto_figure(best: Mapping[str, Any], settings: Sequence[SettingFigures], title: str) -> Any:
     """``pareto.png``: vertices against ATE (left) and completeness (right).
 
-    Every setting is a grey dot, the Pareto front red (joined as a staircase), the paper's
-    setting a blue diamond, the smallest complete map a green ring.
+    Every setting is a grey dot, the Pareto fronts staircases in the swept map's colour, the
+    paper's setting a diamond, the smallest complete map ringed
+    (:func:`app.report_figures.pareto_figure`, a matplotlib figure).
     """
-    width, height = 1240, 560
-    img = np.full((height, width, 3), 255, np.uint8)
-    cv2.putText(img, title[:150], (20, 28), FONT, 0.5, BLACK, 1, cv2.LINE_AA)
-    vertices = np.array([s.vertices for s in settings], dtype=float)
-    panels = (
-        ("ate_m", "ATE (m)", "vertices vs ATE (lower is better)", "front_ate"),
-        (
-            "completeness",
-            "completeness",
-            "vertices vs completeness (higher is better)",
-            "front_completeness",
-        ),
+    from app.report_figures import pareto_figure as draw
+
+    return draw(
+        best,
+        [s.vertices for s in settings],
+        [_nan(s.ate_m) for s in settings],
+        [_nan(s.completeness) for s in settings],
+        title,
+        float(best.get("min_completeness", MIN_COMPLETENESS)),
     )
-    for k, (column, label, panel_title, front_name) in enumerate(panels):
-        values = np.array([getattr(s, column) for s in settings], dtype=float)
-        finite = np.isfinite(values) & np.isfinite(vertices)
-        x_range = _padded(vertices[finite])
-        y_range = _padded(values[finite])
-        if column == "completeness":
-            threshold = float(best.get("min_completeness", MIN_COMPLETENESS))
-            low = min(y_range[0], threshold - 0.002)
-            y_range = (low, max(y_range[1], min(1.0 + 0.05 * (1.0 - low), 1.002)))
-        panel = Panel(img, 90 + k * 610, 90, 500, 370, x_range, y_range)
-        panel.axes("vertices", label, "")
-        cv2.putText(img, panel_title, (panel.left, 70), FONT, 0.5, BLACK, 1, cv2.LINE_AA)
-        if column == "completeness":
-            y = int(panel.to_px(np.array([x_range[0]]), np.array([threshold]))[0, 1])
-            for x in range(panel.left, panel.left + panel.width, 12):
-                cv2.line(img, (x, y), (x + 6, y), BEST_COLOR, 1)
-        if finite.any():
-            for p in panel.to_px(vertices[finite], values[finite]):
-                cv2.circle(img, (int(p[0]), int(p[1])), 3, POINT_COLOR, -1, cv2.LINE_AA)
-        front = best.get(front_name) or []
-        if front:
-            fx = np.array([e["vertices"] for e in front], dtype=float)
-            fy = np.array([_nan(e[column]) for e in front], dtype=float)
-            sx = np.repeat(fx, 2)[1:]
-            sy = np.repeat(fy, 2)[:-1]
-            panel.polyline(sx, sy, FRONT_COLOR, 1)
-            for p in panel.to_px(fx, fy):
-                cv2.circle(img, (int(p[0]), int(p[1])), 4, FRONT_COLOR, -1, cv2.LINE_AA)
-        smallest = best.get("smallest_complete")
-        if smallest:
-            p = panel.to_px(np.array([smallest["vertices"]]), np.array([_nan(smallest[column])]))
-            cv2.circle(img, (int(p[0, 0]), int(p[0, 1])), 9, BEST_COLOR, 2, cv2.LINE_AA)
-        paper = best.get("paper")
-        if paper:
-            p = panel.to_px(np.array([paper["vertices"]]), np.array([_nan(paper[column])]))[0]
-            x, y = int(p[0]), int(p[1])
-            diamond = np.array([[x, y - 8], [x + 8, y], [x, y + 8], [x - 8, y]], np.int32)
-            cv2.fillPoly(img, [diamond], PAPER_COLOR, cv2.LINE_AA)
-    legend = (
-        (POINT_COLOR, "setting"),
-        (FRONT_COLOR, "Pareto front"),
-        (PAPER_COLOR, "paper's setting"),
-        (
-            BEST_COLOR,
-            f"smallest map with completeness >= {best.get('min_completeness', MIN_COMPLETENESS):g}",
-        ),
-    )
-    for k, (color, text) in enumerate(legend):
-        x, y = 90 + k * 240, height - 25
-        cv2.circle(img, (x, y - 4), 6, color, -1 if k < 3 else 2, cv2.LINE_AA)
-        cv2.putText(img, text, (x + 14, y), FONT, 0.45, BLACK, 1, cv2.LINE_AA)
-    return img
 
 
 def _nan(value: Any) -> float:
     return float("nan") if value is None else float(value)
-
-
-def _padded(values: np.ndarray) -> tuple[float, float]:
-    if values.size == 0:
-        return 0.0, 1.0
-    low, high = float(values.min()), float(values.max())
-    pad = 0.06 * (high - low) if high > low else max(abs(high) * 0.05, 0.01)
-    return low - pad, high + pad

@@ -13,7 +13,8 @@ end, the event log, the three maps with their optimisations -- and prints per la
 
 then the totals, the size change of each map over laps 3-N (raw and with ground first explored in
 those laps set apart), the time to save the whole session and to load it again, and the targets.
-It writes ``long_term.png``: sizes per map over time (left) and per-lap cost per stage (right).
+It writes ``long_term.png`` (and ``long_term.svg``): sizes per map over time (left) and per-lap
+cost per stage (right).
 
 Targets (issue "Long-term mapping", 60 laps): compact vertices change laps 3-60 within +-3 % and
 completeness / correctness >= 0.98 at lap 60; front end ms per frame lap 60 <= 1.3 x lap 6's;
@@ -34,11 +35,9 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-import cv2
-import numpy as np
-
-from app.plots import BLACK, FONT, MAP_COLORS, Panel, save_png
+from app.report_figures import long_term_figure, save_figure
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.datasets import open_bag
 from cogmap_core.datasets.generator import MazeConfig, plan_dataset
@@ -50,12 +49,6 @@ from cogmap_core.slam import SlamSession
 MODES = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 SHORT = {MapMode.STANDARD: "std", MapMode.SCENE_INTEGRATION: "si", MapMode.COMPACT: "cmp"}
 STAGES = ("read", "frontend", "log", *(m.value for m in MODES))
-STAGE_COLORS = {
-    "read": (150, 150, 150),
-    "frontend": (40, 160, 40),
-    "log": (160, 40, 160),
-    **MAP_COLORS,
-}
 
 
 def rss_mb() -> float:
@@ -233,39 +226,17 @@ def _lap_line(lap: Lap) -> str:
     )
 
 
-def figure(run: Run, lap_times: tuple[float, ...]) -> np.ndarray:
+def figure(run: Run, lap_times: tuple[float, ...]) -> Any:
     """Sizes per map over time (left) and per-lap ms per frame of each stage (right)."""
-    width, height = 1300, 520
-    img = np.full((height, width, 3), 255, np.uint8)
     histories = {m: run.session.maps[m].size_history() for m in MODES}
-    end = run.last
-    top = max(int(v.max()) if v.size else 1 for _, v, _ in histories.values())
-    sizes = Panel(img, 80, 50, 520, 360, (0.0, end / 3600.0), (0.0, top * 1.05))
-    sizes.axes("data time (h)", "V", "vertices per map over time")
-    for mode, (t, v, _) in histories.items():
-        if t.size:
-            x = np.r_[np.repeat(t, 2)[1:], end] / 3600.0
-            sizes.polyline(x, np.repeat(v, 2).astype(float), MAP_COLORS[mode.value])
-    laps = np.array([lap.lap for lap in run.laps], dtype=float)
-    peak = max(lap.ms(s) for lap in run.laps for s in STAGES)
-    cost = Panel(img, 720, 50, 520, 360, (0.5, laps[-1] + 0.5), (0.0, peak * 1.1))
-    cost.axes("lap", "ms", "per-lap cost per stage (ms per frame)")
-    for stage in STAGES:
-        cost.polyline(laps, np.array([lap.ms(stage) for lap in run.laps]), STAGE_COLORS[stage])
-    for k, stage in enumerate(STAGES):
-        x, y = 80 + k * 200, height - 40
-        cv2.line(img, (x, y), (x + 30, y), STAGE_COLORS[stage], 3)
-        cv2.putText(img, stage, (x + 36, y + 5), FONT, 0.45, BLACK, 1)
-    cv2.putText(
-        img,
-        f"{len(lap_times) - 1} laps, {run.session.log.frames} frames, {end / 3600:.2f} h of data",
-        (80, height - 10),
-        FONT,
-        0.45,
-        BLACK,
-        1,
+    return long_term_figure(
+        histories,
+        run.last,
+        [lap.lap for lap in run.laps],
+        {stage: [lap.ms(stage) for lap in run.laps] for stage in STAGES},
+        f"{len(lap_times) - 1} laps, {run.session.log.frames} frames, "
+        f"{run.last / 3600:.2f} h of data",
     )
-    return img
 
 
 def main() -> int:
@@ -336,8 +307,8 @@ def main() -> int:
     for k in sorted({6, (laps + 1) // 2, 30, laps} & set(range(1, laps + 1))):
         print("  " + _lap_line(run.laps[k - 1]))
     args.out.mkdir(parents=True, exist_ok=True)
-    save_png(figure(run, lap_times), args.out / "long_term.png")
-    print(f"wrote {args.out / 'long_term.png'}")
+    written = save_figure(figure(run, lap_times), args.out / "long_term.png")
+    print("wrote " + ", ".join(str(path) for path in written))
 
     fidelity = fidelities[MapMode.COMPACT]
     ref = run.laps[min(6, laps) - 1]

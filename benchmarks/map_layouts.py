@@ -193,19 +193,19 @@ def evaluate(
     for label, ok in checks:
         print(f"    {'OK    ' if ok else 'MISSED'} {label}")
     if maps_dir is not None:
-        from app.plots import map_figure, save_png
+        from app.report_figures import map_figure, save_figure
 
         maps_dir.mkdir(parents=True, exist_ok=True)
-        snaps = {m.value: built[m].snapshot() for m in MODES}
+        snaps = {m: built[m].snapshot() for m in MODES}
         aligned = {}
         from cogmap_core.evaluation import align_rigid_2d
 
         for m in MODES:
             truth = log.vertex_ground_truth(built[m])
-            poses = snaps[m.value].poses.copy()
+            poses = snaps[m].poses.copy()
             poses[:, :2] = align_rigid_2d(poses, truth).apply(poses[:, :2])
-            aligned[m.value] = poses
-        save_png(
+            aligned[m] = poses
+        save_figure(
             map_figure(np.asarray(log.ground_truth), snaps, aligned),
             maps_dir / f"{data.layout}{'' if data.seed == 1 else f'_seed{data.seed}'}_map.png",
         )

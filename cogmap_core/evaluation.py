@@ -476,3 +476,58 @@ def size_change(
     if v0 == 0:
         return SizeChange(v0, v1, explored, float("nan"), float("nan"))
     return SizeChange(v0, v1, explored, (v1 - v0) / v0, (v1 - explored - v0) / v0)
+
+
+def loop_edge_links(
+    link_time: FloatArray,
+    link_target: NDArray[np.int64],
+    snapshot: MapSnapshot,
+    alias: NDArray[np.int64],
+    refused: frozenset[tuple[float, int]] = frozenset(),
+) -> NDArray[np.int64]:
+    """Per edge of ``snapshot``, the index of the link (loop closure) that made it; -1 for none.
+
+    A map makes a loop-closure edge from a link (time ``t``, target vertex ``g``) that it does not
+    refuse (``refused``: the ``(time, target)`` of its refused relocalisations) and that does not
+    duplicate a connection; the edge is stamped ``t`` and ends at ``g`` -- or, once ``g`` was
+    merged into another vertex, at the vertex standing for it (``alias[g]``, the map's alias table,
+    which the edge's end follows). So a live loop-closure edge (``t``, end ``v``) was made by the
+    first link of time ``t`` whose target stands for ``v`` and which was not refused. Sequential
+    edges get -1 (so would a loop-closure edge with no such link, which a map never holds).
+    """
+    out = np.full(snapshot.edge_from.shape[0], -1, dtype=np.int64)
+    loops = np.flatnonzero(snapshot.edge_kind == 1)
+    if loops.size == 0 or len(link_time) == 0:
+        return out
+    times = np.asarray(link_time, dtype=np.float64)
+    targets = np.asarray(link_target, dtype=np.int64)
+    table = np.asarray(alias, dtype=np.int64)
+    known = (targets >= 0) & (targets < table.size)
+    stands = np.full(targets.shape, -1, dtype=np.int64)
+    stands[known] = table[targets[known]]
+    first: dict[tuple[float, int], int] = {}
+    for k, (t, g, v) in enumerate(
+        zip(times.tolist(), targets.tolist(), stands.tolist(), strict=True)
+    ):
+        if v >= 0 and (t, g) not in refused:
+            first.setdefault((t, v), k)
+    for e in loops.tolist():
+        out[e] = first.get((float(snapshot.edge_time[e]), int(snapshot.edge_to[e])), -1)
+    return out
+
+
+def false_loop_edges(
+    edge_links: NDArray[np.int64], false_links: NDArray[np.bool_]
+) -> NDArray[np.bool_]:
+    """Per edge, whether it is a loop-closure edge made from a link judged false.
+
+    ``edge_links``: :func:`loop_edge_links`; ``false_links``: per link, whether the ground truth
+    calls it false (:meth:`~cogmap_core.slam.EventLog.false_links`). The definition of "false
+    loop closures in the map" of the page and of ``summary.json``.
+    """
+    made = edge_links >= 0
+    out = np.zeros(edge_links.shape[0], dtype=bool)
+    flags = np.asarray(false_links, dtype=bool)
+    inside = made & (edge_links < flags.size)
+    out[inside] = flags[edge_links[inside]]
+    return out

@@ -34,8 +34,10 @@ from cogmap_core.evaluation import (
     SizeChange,
     absolute_trajectory_error,
     dead_reckoning,
+    false_loop_edges,
     interpolate_poses,
     layout_fidelity,
+    loop_edge_links,
     map_accuracy,
     score_loop_closures,
     size_change,
@@ -468,6 +470,31 @@ class EventLog:
         plus the link's relative angle) is within ``heading`` of the robot's true heading
         (``heading=None``: position only). ``false_indices`` index :meth:`link_table`.
         """
+        judged = self._judge_links(distance, heading)
+        return None if judged is None else judged[1]
+
+    def false_links(
+        self,
+        distance: float = TRUE_LOOP_CLOSURE_DISTANCE,
+        heading: float | None = TRUE_LOOP_CLOSURE_HEADING,
+    ) -> NDArray[np.bool_] | None:
+        """Per link (:meth:`link_table` order), whether the ground truth calls it false.
+
+        Judged as :meth:`loop_closure_score` judges (a link it cannot judge is not false); None
+        without ground truth.
+        """
+        judged = self._judge_links(distance, heading)
+        if judged is None:
+            return None
+        known, score = judged
+        out = np.zeros(known.shape[0], dtype=bool)
+        out[np.flatnonzero(known)[list(score.false_indices)]] = True
+        return out
+
+    def _judge_links(
+        self, distance: float, heading: float | None
+    ) -> tuple[NDArray[np.bool_], LoopClosureScore] | None:
+        """The links the truth can judge (mask over :meth:`link_table`) and their score."""
         if not self.has_ground_truth():
             return None
         n = self._n_events
@@ -485,11 +512,11 @@ class EventLog:
         target_time = time[made_at[target[known]]]
         relative = self._value0[links[known]]
         if not robot.shape[0]:
-            return score_loop_closures(np.zeros((0, 3)), np.zeros((0, 3)))
+            return known, score_loop_closures(np.zeros((0, 3)), np.zeros((0, 3)))
         target_truth = self.truth_at(target_time)
         if heading is None:
-            return score_loop_closures(robot, target_truth, None, distance)
-        return score_loop_closures(robot, target_truth, relative, distance, heading)
+            return known, score_loop_closures(robot, target_truth, None, distance)
+        return known, score_loop_closures(robot, target_truth, relative, distance, heading)
 
     def recording(self, source: str = "", frontend: dict[str, Any] | None = None) -> EventRecording:
         """The log as an :class:`~cogmap_core.event_file.EventRecording` (to save or replay)."""
@@ -629,6 +656,45 @@ class SlamSession:
         """Front-end loop closures judged by ground truth, with the session's tolerances."""
         judging = self.evaluation
         return self.log.loop_closure_score(judging.loop_distance, judging.loop_heading)
+
+
+def link_resolution(cmap: CognitiveMap) -> tuple[NDArray[np.int64], frozenset[tuple[float, int]]]:
+    """A copy of what ties a map's loop-closure edges to the links that made them.
+
+    The map's alias table (every vertex id to the live vertex standing for it) and the
+    ``(time, target)`` of the relocalisations it refused, for
+    :func:`~cogmap_core.evaluation.loop_edge_links` (a copy: it can be read while the map grows).
+    """
+    alias = np.array(cmap.graph.alias[: cmap.graph.num_ids], dtype=np.int64)
+    refused = frozenset((float(c.time), int(c.target)) for c in cmap.refused)
+    return alias, refused
+
+
+def map_false_loop_edges(
+    log: EventLog,
+    cmap: CognitiveMap,
+    judging: EvaluationSettings | None = None,
+    snapshot: MapSnapshot | None = None,
+) -> int | None:
+    """How many of a map's loop-closure edges were made from links the ground truth calls false.
+
+    "False loop closures in the map" on the page and in ``summary.json``: a live loop-closure
+    edge counts when the link that made it (:func:`~cogmap_core.evaluation.loop_edge_links`) is
+    false (``judging``'s tolerances, a bag's by default). None without ground truth.
+    ``snapshot``: the map's snapshot when the caller has taken one.
+    """
+    judging = judging or EvaluationSettings()
+    false = log.false_links(judging.loop_distance, judging.loop_heading)
+    if false is None:
+        return None
+    snap = cmap.snapshot() if snapshot is None else snapshot
+    alias, refused = link_resolution(cmap)
+    links = log.link_table()
+    edge_links = loop_edge_links(
+        np.array([t for t, _, _ in links]), np.array([g for _, g, _ in links], dtype=np.int64),
+        snap, alias, refused,
+    )  # fmt: skip
+    return int(np.count_nonzero(false_loop_edges(edge_links, false)))
 
 
 def optimisation_summary(cmap: CognitiveMap) -> dict[str, float | int]:

@@ -13,7 +13,9 @@ then a missing browser is a failure.
 
 from __future__ import annotations
 
+import bisect
 import json
+import math
 import os
 import re
 import shutil
@@ -28,6 +30,7 @@ import numpy as np
 import pytest
 
 from app.server.params import SPECS, format_value
+from app.server.replay import PlaybackState
 from app.server.scene import MAP_COLORS, PINNED_COLOR
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -37,6 +40,7 @@ from tests.test_server_support import until, wait
 
 short_bag = support.short_bag  # session fixtures
 reference = support.reference
+false_log = support.false_log
 
 CHROMIUM = os.environ.get("COGMAP_CHROMIUM", "/usr/bin/chromium")
 REQUIRED = bool(os.environ.get("COGMAP_REQUIRE_BROWSER"))
@@ -79,6 +83,16 @@ def colour_pixels(png: bytes, rgb: tuple[int, int, int], tolerance: int = 40) ->
     image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
     target = np.array(rgb[::-1], dtype=np.int16)
     return int(np.count_nonzero(np.abs(image.astype(np.int16) - target).max(axis=2) < tolerance))
+
+
+def map_pixels(png: bytes, rgb: tuple[int, int, int], tolerance: int = 40) -> int:
+    """:func:`colour_pixels` of a canvas screenshot without the axes gizmo at the bottom left
+    (its x axis is red, its y axis green)."""
+    image = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    image[-130:, :130] = 255
+    ok, data = cv2.imencode(".png", image)
+    assert ok
+    return colour_pixels(data.tobytes(), rgb, tolerance)
 
 
 def control(page: Any, label: str) -> Any:
@@ -179,6 +193,13 @@ def camera_settled(view: Any) -> bool:
         and view._camera_acknowledged
         and tuple(view.client.camera.position) == first
     )
+
+
+def camera_still(view: Any) -> bool:
+    """Whether the browser shows the pose the view last set, still (two reads 100 ms apart)."""
+    first = tuple(view.client.camera.position)
+    time.sleep(0.1)
+    return view._camera_acknowledged and tuple(view.client.camera.position) == first
 
 
 def close_notices(page: Any) -> None:
@@ -296,6 +317,8 @@ def test_the_page_in_chromium(
             inspect = page.locator("#cogmap-inspect")
             until(lambda: inspect.get_attribute("data-kind") == "vertex", WAIT_S, "a pick")
             assert f"vertex id {snap.vertex_ids[k]}" in " ".join(inspect.inner_text().split())
+            found = inspect.bounding_box()  # issue 25, item 14: on top, not below the fold
+            assert found is not None and found["y"] >= 0 and found["y"] + found["height"] <= 950
 
             # ---- pin the compact map, change delta, compare
             page.get_by_role("button", name="pin the shown map").click()
@@ -365,6 +388,18 @@ def test_the_page_in_chromium(
             assert "cogmap replay" in out.read_text()[:20000]
             assert download.value.suggested_filename == "my_replay.html"
             assert Path(download.value.path()).read_bytes() == out.read_bytes()
+            # issue 25, item 13: the replay's caption leaves its play button and time box free
+            replay = browser.new_page(viewport={"width": 1400, "height": 950})
+            replay.goto(out.as_uri(), timeout=TIMEOUT_MS)
+            caption = replay.locator("#cogmap-replay-caption")
+            caption.wait_for(timeout=TIMEOUT_MS)
+            time_box = replay.locator("input.mantine-NumberInput-input").first
+            time_box.wait_for(timeout=TIMEOUT_MS)
+            bar = time_box.locator("xpath=ancestor::div[contains(@class,'mantine-Paper-root')][1]")
+            play = bar.locator("button").first
+            for covered in (play, time_box, bar):
+                assert not overlap(caption.bounding_box(), covered.bounding_box())
+            replay.close()
             page.screenshot(path=str(ARTIFACTS / "browser-final.png"))
             shots.append(ARTIFACTS / "browser-final.png")
         finally:
@@ -431,3 +466,274 @@ def test_chromium_keeps_other_origins_out_and_the_token_holder_in(
         evil.shutdown()
         app.stop()
         server.stop()
+
+
+def overlap(a: dict[str, float] | None, b: dict[str, float] | None) -> bool:
+    """Whether two bounding boxes (playwright's) overlap."""
+    assert a is not None and b is not None
+    return not (
+        a["x"] + a["width"] <= b["x"]
+        or b["x"] + b["width"] <= a["x"]
+        or a["y"] + a["height"] <= b["y"]
+        or b["y"] + b["height"] <= a["y"]
+    )
+
+
+def on_screen(view: Any, points: np.ndarray) -> np.ndarray:
+    """Where ground points are drawn in the tab's canvas, as fractions of its width and height.
+
+    (The camera as the browser reports it; the plan view looks straight down, so a point's
+    place follows from the camera's height, field of view and the point's offset from where
+    it looks. The canvas's own pixels need not be the page's: viser renders at a resolution
+    of its choosing.)
+    """
+    camera = view.client.camera
+    position, look_at = np.asarray(camera.position), np.asarray(camera.look_at)
+    per_px = 2.0 * position[2] * math.tan(camera.fov / 2.0) / camera.image_height
+    u = camera.image_width / 2.0 + (points[:, 0] - look_at[0]) / per_px
+    v = camera.image_height / 2.0 - (points[:, 1] - look_at[1]) / per_px
+    return np.stack([u / camera.image_width, v / camera.image_height], axis=1)
+
+
+def chart_state(page: Any) -> dict[str, Any]:
+    """The size chart as the browser draws it (viser's uPlot test point and the canvas)."""
+    return page.evaluate(
+        """() => {
+        const t = Object.values(window.__viserTestpoints?.uplots ?? {})[0];
+        if (!t) return null;
+        const u = t.chart, ratio = window.devicePixelRatio || 1;
+        const canvas = u.root.querySelector('canvas');
+        const ctx = canvas.getContext('2d');
+        const rows = ctx.getImageData(0, 0, canvas.width, 3).data;
+        let dark = 0;  // glyph pixels in the canvas's top rows: a label cut at the top
+        for (let k = 0; k < rows.length; k += 4)
+            if (rows[k + 3] > 0 && rows[k] + rows[k + 1] + rows[k + 2] < 300) dark += 1;
+        return {x: [u.scales.x.min, u.scales.x.max], y: [u.scales.y.min, u.scales.y.max],
+                top: u.bbox.top / ratio, left: u.bbox.left / ratio, darkTop: dark};
+    }"""
+    )
+
+
+def test_issue_25_in_chromium(
+    short_bag: Path,
+    reference: SlamSession,
+    false_log: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Issue 25 in Chromium at 1600 x 1000: each item driven and checked as a researcher sees it.
+
+    One server and one browser: the figure-eight bag played with the tab open (chart, plan
+    view, grid, names, sizes, seek, rebuild, tooltips, labels, restart, pose cells, inspect),
+    then a log with false loop closures opened from the page (the same definition everywhere,
+    a 50 m grid, no camera).
+    """
+    _require_browser()
+    from playwright.sync_api import sync_playwright
+
+    from app.palette import FALSE_LOOP_COLOR, GROUND_TRUTH_COLOR, css
+    from app.server.chart import x_end
+    from app.server.view import PLAN_FOV, VIEW_FOV
+    from cogmap_core.slam import map_false_loop_edges
+    from cogmap_core.sources.detect import open_source
+    from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
+    from tests.test_page_live import _Slow
+
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    frames = reference.log.frames
+    folders = [short_bag.parent, false_log.parent]
+    with (
+        support.running_app(short_bag, autoplay=False, speed=10.0, data_dirs=folders) as app,
+        sync_playwright() as p,
+    ):
+        wait(app)
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1600, "height": 1000})
+            page.goto(f"http://127.0.0.1:{app.server.get_port()}", timeout=TIMEOUT_MS)
+            page.locator("#cogmap-status").wait_for(timeout=TIMEOUT_MS)
+            until(lambda: len(app.views) == 1, WAIT_S, "the tab's view")
+            close_notices(page)
+            view = next(iter(app.views.values()))
+            canvas = page.locator("canvas").first
+
+            # ---- plan view by default (as good as orthographic), 3-D one click away
+            until(lambda: view.client.camera.fov == pytest.approx(PLAN_FOV), WAIT_S, "plan")
+            page.get_by_role("button", name="3-D view").click()
+            until(lambda: view.client.camera.fov == pytest.approx(VIEW_FOV), WAIT_S, "3-D")
+            page.get_by_role("button", name="plan view").click()
+            until(lambda: view.client.camera.fov == pytest.approx(PLAN_FOV), WAIT_S, "plan")
+
+            # ---- item 1: the chart of a tab open during the replay follows it
+            page.get_by_role("button", name="play", exact=True).click()
+            until(lambda: (app.replay.frame_time or 0) > 20, WAIT_S, "20 s played")
+            until(
+                lambda: (
+                    (c := chart_state(page)) is not None
+                    and c["x"][1] >= app.replay.frame_time - 2.0
+                ),
+                WAIT_S,
+                "the chart's x axis following the replay",
+            )
+            page.wait_for_selector('#cogmap-status[data-state="ended"]', timeout=TIMEOUT_MS)
+            end = reference.log.frame_time[-1]
+            until(lambda: chart_state(page)["x"] == [0, x_end(end)], WAIT_S, "x to the end")
+            chart = chart_state(page)
+            assert chart["top"] >= 8 and chart["darkTop"] == 0  # the top y label is not cut
+
+            # ---- items 9, 10, 16, 8: the map framed whole, dots not huge, bar clear of the
+            # gizmo, the map's colour, no red (no loop closure of this bag is false)
+            until(lambda: camera_still(view), WAIT_S, "the camera framing the map")
+            snap = app.replay.session.maps[MapMode.COMPACT].snapshot()
+            box = canvas.bounding_box()
+            assert box is not None and box["x"] + box["width"] <= 1600 - 350  # (the panel)
+            at = on_screen(view, snap.poses[:, :2]) * [box["width"], box["height"]]
+            assert at[:, 0].min() >= 60 and at[:, 0].max() <= box["width"] - 60
+            assert at[:, 1].min() >= 60 and at[:, 1].max() <= box["height"] - 60
+            shot = canvas.screenshot()
+            assert map_pixels(shot, MAP_COLORS[MapMode.COMPACT], 30) > 300
+            assert map_pixels(shot, FALSE_LOOP_COLOR, 45) == 0
+            bx0, bx1, by = view.grid.bar
+            bar = on_screen(view, np.array([[bx0, by], [bx1, by]])) * [box["width"], box["height"]]
+            assert bar[:, 0].min() > 160 and (bar[:, 1] < box["height"] - 110).all()  # gizmo
+            per_px = 2 * view.client.camera.position[2] * math.tan(PLAN_FOV / 2) / box["height"]
+            assert 3 <= app.streamer.marker / per_px <= 16  # dots of a few pixels
+
+            # ---- item 17: labels on one line, readable slider ends, a camera picture you can
+            # see; restart after the end plays
+            wrapped = page.evaluate(
+                """() => [...document.querySelectorAll('label[for]')]
+                .filter(l => l.offsetParent !== null)
+                .map(l => [l.textContent, l.parentElement.getBoundingClientRect().height])
+                .filter(([t, h]) => h > 24)"""
+            )
+            assert wrapped == []
+            sizes = page.evaluate(
+                """() => [...document.querySelectorAll('.mantine-Slider-markLabel')]
+                .map(e => parseFloat(getComputedStyle(e).fontSize))"""
+            )
+            assert sizes and min(sizes) >= 11.5
+            images = page.evaluate(
+                """() => [...document.querySelectorAll('img[src^="blob:"]')]
+                .map(i => i.getBoundingClientRect().width)"""
+            )
+            assert len(images) >= 3 and min(images) >= 300  # camera, view templates, pose cells
+            # the network behind the map: pose cells with the peak, view template and match
+            assert "pose-cell network" in page.locator("#cogmap-pose-cells").inner_text()
+            assert "threshold" in page.locator("#cogmap-match").inner_text()
+
+            # ---- item 4: a seek while paused shows its frame
+            camera_src = "() => document.querySelector('img[src^=blob]').src"
+            before = page.evaluate(camera_src)
+            seek = control(page, "go to (s)")
+            seek.click()
+            seek.fill("30")
+            seek.press("Enter")
+            k = bisect.bisect_right(reference.log.frame_time, 30.0)
+            until(lambda: app.replay.cursor == k, WAIT_S, "the seek")
+            page.wait_for_function(
+                "(said) => document.body.innerText.includes(said)",
+                arg=f"frame {k} / {frames}",
+                timeout=TIMEOUT_MS,
+            )
+            assert page.evaluate(camera_src) != before
+            page.wait_for_function(  # (replaying cached frames: the pose cells say so)
+                "() => (document.getElementById('cogmap-pose-cells')?.textContent ?? '')"
+                ".includes('the front end last ran at frame')",
+                timeout=TIMEOUT_MS,
+            )
+
+            # ---- item 5: a rebuild in progress is shown, then what the maps were built with
+            app.replay.builder = _Slow(app.replay.builder, 1.0)
+            delta = control(page, "δ =")
+            # ---- item 6: no tooltip over the box being typed in (the mouse rests on it)
+            delta.hover()
+            delta.click()
+            delta.fill("8")
+            page.wait_for_timeout(900)  # (tooltips open after 500 ms)
+            box = delta.bounding_box()
+            for tip in page.locator(".mantine-Tooltip-tooltip").all():
+                if tip.is_visible():
+                    assert not overlap(tip.bounding_box(), box)
+            delta.press("Enter")
+            page.wait_for_selector("#cogmap-rebuild", timeout=TIMEOUT_MS)
+            assert (
+                "rebuilding compact for δ = 8 (was 3.746)"
+                in page.locator("#cogmap-rebuild").inner_text()
+            )
+            page.wait_for_selector("#cogmap-rebuild", state="detached", timeout=TIMEOUT_MS)
+            assert "δ 8" in page.locator("#cogmap-built").inner_text()
+            app.replay.builder = app.replay.builder.builder  # (the real one again)
+
+            # ---- items 7, 14: side by side with names on one grid; a click's details on top
+            control(page, "side by side").click()
+            until(lambda: len(view.state.shown) == 2, WAIT_S, "side by side")
+            until(lambda: camera_still(view), WAIT_S, "the camera framing the two maps")
+            for mode in view.state.shown:
+                label = app.streamer.layers[mode].label
+                assert label.visible and label.text == mode.value
+            shot = canvas.screenshot()
+            for mode in view.state.shown:
+                assert map_pixels(shot, MAP_COLORS[mode], 30) > 100, mode
+            assert map_pixels(shot, GROUND_TRUTH_COLOR, 8) > 200  # the truth's band
+            snap = app.replay.session.maps[MapMode.COMPACT].snapshot()  # (δ = 8 now)
+            k = snap.vertex_ids.shape[0] // 2
+            box = canvas.bounding_box()
+            u, v = on_screen(view, snap.poses[k : k + 1, :2])[0]
+            page.mouse.click(box["x"] + u * box["width"], box["y"] + v * box["height"])
+            inspect = page.locator("#cogmap-inspect")
+            until(lambda: inspect.get_attribute("data-kind") is not None, WAIT_S, "a pick")
+            found = inspect.bounding_box()
+            assert found is not None and 0 <= found["y"] and found["y"] + found["height"] <= 1000
+            legend = page.locator("#cogmap-legend").inner_html()
+            assert css(MAP_COLORS[MapMode.COMPACT]) in legend.replace(" ", "")
+
+            # ---- item 17: restart after the end plays
+            app.replay.seek(1e9)
+            page.wait_for_selector('#cogmap-status[data-state="ended"]', timeout=TIMEOUT_MS)
+            page.get_by_role("button", name="restart").click()
+            page.wait_for_selector('#cogmap-status[data-state="playing"]', timeout=TIMEOUT_MS)
+            page.get_by_role("button", name="pause", exact=True).click()
+
+            # ---- item 12: a log opened from the page, as cogmap serve FILE opens it
+            listed = f"{false_log.parent.name}/{false_log.name}"
+            choose(page, "speed", "max")  # (the log's 500 s: a few seconds, updated in steps)
+            page.get_by_text("Open another bag or log — shared").click()  # (folded at first)
+            choose(page, "bag or log", listed)
+            page.get_by_role("button", name="open", exact=True).click()
+            page.wait_for_function(
+                "() => (document.getElementById('cogmap-open')?.textContent ?? '')"
+                ".startsWith('opened')",
+                timeout=TIMEOUT_MS,
+            )
+            until(lambda: app.replay.state is PlaybackState.ENDED or app.replay.at_end, 60)
+            wait(app)
+            # ---- items 2, 3, 15: one definition of false loop closures, for the three maps
+            reader = open_source(false_log)
+            session = SlamSession(LOG_MAP_PARAMS, evaluation=reader.evaluation)
+            session.run(reader.frames())
+            for mode in MapMode:
+                figure = map_false_loop_edges(session.log, session.maps[mode], session.evaluation)
+                page.wait_for_function(
+                    "([id, v]) => document.getElementById(id)?.textContent === v",
+                    arg=[f"cogmap-{mode.value}-false", str(figure)],
+                    timeout=TIMEOUT_MS,
+                )
+            false = session.loop_closure_score().false
+            assert page.locator("#cogmap-loops-false").inner_text() == str(false)
+            assert page.locator("#cogmap-standard-duplicates").inner_text().isdigit()
+            # ---- item 11: a 50 m building: a grid of metres, dots you can see, red false ones
+            assert "No camera" in page.locator("#cogmap-network").inner_text()
+            until(lambda: view.grid.section >= 10, WAIT_S, "a coarser grid")
+            until(lambda: camera_still(view), WAIT_S, "the camera framing the log's maps")
+            page.screenshot(path=str(ARTIFACTS / "browser-issue25-log.png"))
+            shot = canvas.screenshot()
+            for mode in view.state.shown:
+                assert map_pixels(shot, MAP_COLORS[mode], 45) > 150, mode
+            assert map_pixels(shot, FALSE_LOOP_COLOR, 45) > 20  # the false ones, in red
+        finally:
+            browser.close()
+    took = time.perf_counter() - started
+    with capsys.disabled():
+        print(f"\nissue 25 in Chromium: {took:.0f} s")

@@ -37,7 +37,9 @@ REPORT_ORDER = (
     "trajectory_tum.txt",
     "groundtruth_tum.txt",
     "size.png",
+    "size.svg",
     "map.png",
+    "map.svg",
 )
 REPORT = {MARKER, *REPORT_ORDER}
 
@@ -349,11 +351,11 @@ def test_full_disk_faked_keeps_the_old_report(
     old = old_report(bag, out)
     import app.pipeline
 
-    def full(image: object, path: Path) -> None:
+    def full(figure: object, path: Path) -> list[Path]:
         path.write_bytes(b"\x89PNG half")
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(app.pipeline, "save_png", full)
+    monkeypatch.setattr(app.pipeline, "save_figure", full)
     capsys.readouterr()
     assert main(["run", str(bag), "--out", str(out), "--force"]) == 2
     assert "No space left on device" in one_line_error(capsys.readouterr().err)

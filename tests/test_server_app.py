@@ -12,6 +12,7 @@ import csv
 import html
 import io
 import json
+import math
 import threading
 import time
 import urllib.request
@@ -304,11 +305,12 @@ def test_seek_and_restart_replay_from_the_cache(short_bag: Path, reference: Slam
         wait(app)
         assert app.replay.state is PlaybackState.ENDED
         assert app.seek_slider.value == round(reference.log.frame_time[-1], 1)  # follows
+        # restart plays from the start (issue 25: it used to leave playback paused at frame 0)
+        app.replay.set_speed(20.0)
         app.restart_button.value = True  # a click
-        wait(app)
-        assert app.replay.cursor == 0 and app.replay.state is PlaybackState.PAUSED
-        assert app.streamer.layers[MapMode.COMPACT].vertices.num_items == 0
-        app.play_button.value = True
+        until(lambda: app.replay.state is PlaybackState.PLAYING, 10, "playing from the start")
+        assert app.replay.cursor < reference.log.frames // 2
+        app.replay.set_speed(math.inf)
         wait(app)
         assert app.replay.state is PlaybackState.ENDED
         for mode in MapMode:
@@ -738,7 +740,7 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
     Views take it briefly for what they read; the figures are computed from inputs taken under it.
     """
     with _idle_app_with_one_viewer(short_bag) as app:
-        figures, false_times = dict(app._figures), app._false_times.copy()
+        figures, links = dict(app._figures), app._links
         assert len(figures) == len(ALL_MODES)
         free: list[tuple[str, bool]] = []
 
@@ -749,9 +751,7 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
 
             return call
 
-        monkeypatch.setattr(
-            app_module, "false_link_times", spy("false links", app_module.false_link_times)
-        )
+        monkeypatch.setattr(app_module, "judge_links", spy("false links", app_module.judge_links))
         monkeypatch.setattr(
             app_module, "compute_figures", spy("figures", app_module.compute_figures)
         )
@@ -770,7 +770,8 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
             ("view", True)
         ]
         assert app._figures == figures
-        np.testing.assert_array_equal(app._false_times, false_times)
+        np.testing.assert_array_equal(app._links.time, links.time)
+        np.testing.assert_array_equal(app._links.false, links.false)
         # the per-frame update refreshes each view outside the replay lock too
         free.clear()
         app.on_maps(app.replay, ALL_MODES, forced=True)

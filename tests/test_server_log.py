@@ -6,14 +6,13 @@ import bisect
 import re
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from app.cli import main
 from app.server import export
 from app.server.app import recent_links
 from app.server.export import summary_dict, summary_inputs
-from app.server.figures import false_link_label, layout_radius_label
+from app.server.figures import LinkJudgement, false_link_label, layout_radius_label
 from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -135,13 +134,13 @@ def test_the_page_and_the_replay_judge_a_log_with_its_own_tolerances(
     assert layout_radius_label(EvaluationSettings()) == "8 cm"
     assert false_link_label(EvaluationSettings()) == "position 0.1 m, heading 10°"
     judged: list[EvaluationSettings | None] = []
-    real = export.false_link_times
+    real = export.judge_links
 
-    def spy(log: EventLog, judging: EvaluationSettings | None = None) -> np.ndarray:
+    def spy(log: EventLog, judging: EvaluationSettings | None = None) -> LinkJudgement:
         judged.append(judging)
         return real(log, judging)
 
-    monkeypatch.setattr(export, "false_link_times", spy)
+    monkeypatch.setattr(export, "judge_links", spy)
     with running_app(square_log, params=LOG_MAP_PARAMS, defaults=LOG_MAP_PARAMS) as app:
         wait(app)
         export.save_html_replay(app.replay, (MapMode.COMPACT,), tmp_path / "r.html", 3, 0.1)

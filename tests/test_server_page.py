@@ -455,7 +455,7 @@ def test_cluster_log_is_an_html_table(short_bag: Path, reference: SlamSession) -
         compact = reference.maps[MapMode.COMPACT]
         page = app.cluster_log_html(MapMode.COMPACT, app.replay.session.maps[MapMode.COMPACT])
         heads = re.findall(r"<th>([^<]*)</th>", page)
-        assert heads == ["t (s)", "cluster", "edges", "V", "iters", "ms", "merged", "short"]
+        assert heads == ["t (s)", "cluster", "links", "V", "iters", "ms", "merged", "short"]
         rows = re.findall(r"<tr><td>", page)
         assert len(rows) == min(12, len(compact.optimizations))
 

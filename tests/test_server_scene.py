@@ -10,22 +10,20 @@ import viser
 
 from app.server.scene import (
     CHUNK,
-    FALSE_LOOP_COLOR,
     LOOP_Z,
     MAP_COLORS,
-    ROBOT_COLOR,
-    SEQUENTIAL_COLOR,
     SEQUENTIAL_Z,
+    VERTEX_FRACTION,
     ChunkedNodes,
     MapExtras,
     MapLayer,
     SceneStreamer,
     StreamStats,
-    _lab,
     cluster_color,
     edge_error,
     edge_errors,
     edge_segments,
+    nice,
 )
 from app.server.view import describe_edge
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
@@ -116,6 +114,13 @@ def circle_events(vertices: int, laps: int = 2, start: int = 0) -> list[MapEvent
     return events
 
 
+def _scaled(event: MapEvent, factor: float) -> MapEvent:
+    """``event`` with its odometry's translation scaled (a map ``factor`` times as large)."""
+    if isinstance(event, Odometry):
+        return Odometry(event.time, event.translation * factor, event.rotation)
+    return event
+
+
 @pytest.fixture
 def server() -> viser.ViserServer:
     s = make_server()
@@ -200,18 +205,7 @@ def test_side_by_side_shows_the_second_map_beside_the_first(server: viser.ViserS
     assert not layers[MapMode.STANDARD].groups["truth"].visible
 
 
-def test_cluster_colours_are_distinct_and_apart_from_the_other_colours() -> None:
-    colours = [cluster_color(c) for c in range(26)]  # the default dataset's 26 clusters
-    assert len(set(colours)) == 26  # (a 10-colour palette repeated after 10)
-    lab = _lab(np.array(colours, dtype=float))
-    apart = np.linalg.norm(lab[:, None] - lab[None], axis=2)
-    np.fill_diagonal(apart, np.inf)
-    assert apart.min() > 20  # every pair clearly different (CIE L*a*b*)
-    assert min(apart[k, k + 1] for k in range(25)) > 30  # neighbours in id very different
-    reserved = [*MAP_COLORS.values(), SEQUENTIAL_COLOR, ROBOT_COLOR, FALSE_LOOP_COLOR]
-    gap = np.linalg.norm(lab[:, None] - _lab(np.array(reserved, dtype=float))[None], axis=2)
-    assert gap.min() > 20  # no cluster looks like a map, the grey edges, the robot, a false link
-    assert all(max(c) - min(c) > 60 for c in colours)  # saturated: no grey
+# (the cluster colours are checked in tests/test_palette.py, for every vision)
 
 
 def test_edge_colourings_are_streamed_only_when_a_viewer_uses_them(
@@ -229,7 +223,7 @@ def test_edge_colourings_are_streamed_only_when_a_viewer_uses_them(
     assert layer.edges["sequential/cluster"].num_items == sequential
     assert layer.edges["loop/time"].num_items == 0 and layer.edges["loop/error"].num_items == 0
     colors = layer.edges["sequential/cluster"].colors()
-    assert colors is not None and (colors == SEQUENTIAL_COLOR).all()
+    assert colors is not None and (colors == MAP_COLORS[MapMode.STANDARD]).all()  # its map's
     loop_colors = layer.edges["loop/cluster"].colors()
     snap = cmap.snapshot()
     clusters = snap.edge_cluster[snap.edge_kind == 1]
@@ -254,23 +248,36 @@ def test_false_loop_closures_truth_alignment_and_vertex_size(server: viser.Viser
     dense.apply_all(circle_events(800, laps=2))
     dense.finish()
     snap = dense.snapshot()
-    loop_times = snap.edge_time[snap.edge_kind == 1]
-    false = loop_times[::3]
+    loops = snap.edge_kind == 1
+    pairs = list(zip(snap.edge_time[loops].tolist(), snap.edge_to[loops].tolist(), strict=True))
+    false = frozenset(pairs[::3])  # (time, end vertex)
     extras = MapExtras((0.3, 1.0, -2.0), false)
     streamer.show((MapMode.STANDARD,))
     streamer.publish({MapMode.STANDARD: dense}, extras={MapMode.STANDARD: extras})
     layer = streamer.layers[MapMode.STANDARD]
-    assert layer.false_count == layer.false_loops.num_items == false.size
+    assert layer.false_count == layer.false_loops.num_items == len(false)
     assert tuple(layer.truth_frame.position) == (1.0, -2.0, 0.0)
     w, x, y, z = layer.truth_frame.wxyz
     assert np.isclose(2 * np.arctan2(z, w), 0.3)
-    # dense maps get small vertices (a third of the typical edge), sparse ones the largest
-    assert layer.point_size == pytest.approx(round(14.0 / 400 / 3 / 0.002) * 0.002)
+    # vertices are sized by the extent mapped (issue 25: a 4.5 m circle), not by the map's
+    # density (which the parameters change): a dense and a sparse map of it alike
+    extent = layer.extent
+    assert extent is not None and extent[1] - extent[0] == pytest.approx(4.46, abs=0.05)
+    span = max(extent[1] - extent[0], extent[3] - extent[2])
+    assert layer.point_size == streamer.marker == nice(span * VERTEX_FRACTION) == 0.015
     sparse = CognitiveMap(MapMode.STANDARD)
     sparse.apply_all(circle_events(40, laps=1))
     streamer.show((MapMode.COMPACT,))
     streamer.publish({MapMode.COMPACT: sparse})
-    assert streamer.layers[MapMode.COMPACT].point_size == 0.03
+    assert streamer.layers[MapMode.COMPACT].point_size == layer.point_size
+    # ten times the extent, ten times the size (both rounded); the robot's arrow follows
+    big = SceneStreamer(server)
+    wide = CognitiveMap(MapMode.STANDARD)
+    wide.apply_all([_scaled(e, 10.0) for e in circle_events(200, laps=1)])
+    big.show((MapMode.STANDARD,))
+    big.publish({MapMode.STANDARD: wide})
+    assert big.marker == pytest.approx(10 * layer.point_size, rel=0.34)
+    assert big.layers[MapMode.STANDARD].point_size == big.marker
 
 
 def test_one_edges_residual_is_the_whole_graphs_to_the_last_bit(
@@ -290,7 +297,7 @@ def test_one_edges_residual_is_the_whole_graphs_to_the_last_bit(
         for k in range(errors.shape[0]):
             assert edge_error(snap, k, sigmas) == errors[k]
         for k in (0, int(np.argmax(errors)), errors.shape[0] - 1):
-            text = describe_edge(cmap, snap, k, np.zeros(0))
+            text = describe_edge(cmap, snap, k)
             assert f"<td>residual</td><td>{errors[k]:.2f} σ (whitened" in text
 
 

@@ -449,7 +449,7 @@ def test_serve_stops_on_sigterm_after_a_visitor_tried_a_fifo(
         ws = open_ws(port)
         found = controls(ws)
         for value in ("pipe.bag", "/dev/stdin", "other.bag"):
-            update(ws, found["dropdown bag"], value)
+            update(ws, found["dropdown bag or log"], value)
             update(ws, found["button open"], True)
         update(ws, found["button play"], True)
         assert any(

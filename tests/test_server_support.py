@@ -46,6 +46,22 @@ def reference(short_bag: Path) -> SlamSession:
     return session
 
 
+#: A log with false loop closures, some of them at the same time as true ones (one place
+#: recognition query, several candidates): 500 s in two look-alike corridors, 30 % false.
+FALSE_LOG = ("--pattern", "parallel_corridors", "--duration", "500", "--seed", "1",
+             "--false-fraction", "0.3")  # fmt: skip
+
+
+@pytest.fixture(scope="session")
+def false_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A TUC log (``corridors_Input.txt`` and its ground truth) made by ``cogmap make-log``."""
+    from app.cli import main
+
+    prefix = tmp_path_factory.mktemp("server-log") / "corridors"
+    assert main(["make-log", str(prefix), *FALSE_LOG]) == 0
+    return prefix.parent / "corridors_Input.txt"
+
+
 def make_server(policy: AccessPolicy | None = None) -> viser.ViserServer:
     """A viser server on loopback (a port the OS chooses), guarded as ``cogmap serve``'s."""
     return guarded_server("127.0.0.1", 0, policy or AccessPolicy(), quiet=True)

@@ -256,24 +256,30 @@ def test_results_table_round_trips_and_survives_a_cut_line(tmp_path: Path):
 
 
 def test_figures_are_written_atomically(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    # pareto.png (and cogmap run's figures) go through app.plots.save_png
+    # pareto.png (and cogmap run's figures) go through app.report_figures.save_figure: the PNG
+    # and the SVG beside it, each written atomically
     import os
 
-    from app.plots import save_png
+    from app.report_figures import save_figure, size_figure
+
+    def figure() -> object:
+        return size_figure({}, 10.0)
 
     target = tmp_path / "pareto.png"
-    save_png(np.zeros((4, 6, 3), np.uint8), target)
+    assert save_figure(figure(), target) == [target, tmp_path / "pareto.svg"]
     assert target.read_bytes()[:4] == b"\x89PNG"
+    assert b"<svg" in (tmp_path / "pareto.svg").read_bytes()[:400]
     target.write_bytes(b"the previous figure")
+    (tmp_path / "pareto.svg").write_bytes(b"the previous svg")
 
     def full_disk(fd: int) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(os, "fsync", full_disk)
     with pytest.raises(OSError, match="No space left on device"):
-        save_png(np.zeros((4, 6, 3), np.uint8), target)
+        save_figure(figure(), target)
     assert target.read_bytes() == b"the previous figure"
-    assert list(tmp_path.iterdir()) == [target]  # no partial file left behind
+    assert (tmp_path / "pareto.svg").read_bytes() == b"the previous svg"
 
 
 # --------------------------------------------------------------------------- the engine
@@ -332,7 +338,7 @@ def test_interrupted_sweep_resumes_without_recomputing(
     assert len(keys) == len(set(keys)) == 8  # nothing computed twice
     assert sorted(keys) == sorted(c.key for c in second.cells)
     assert json.loads((out / "sweep.json").read_text())["status"] == "complete"
-    assert (out / "pareto.png").stat().st_size > 0
+    assert (out / "pareto.png").stat().st_size > 0 and (out / "pareto.svg").stat().st_size > 0
 
     # the same figures as the cells built one by one in this process
     events = {source.key: prepare_events(source, out)}

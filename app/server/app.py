@@ -33,7 +33,7 @@ import viser
 import viser.uplot
 
 from app.server.assets import head_html, help_markdown
-from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, y_top
+from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, x_end, y_top
 from app.server.export import (
     default_replay_name,
     g2o_bytes,
@@ -43,15 +43,19 @@ from app.server.export import (
     summary_inputs,
 )
 from app.server.figures import (
+    NO_LINKS,
     FigureInputs,
+    LinkJudgement,
     MapFigures,
     compute_figures,
     false_link_inputs,
-    false_link_times,
+    false_link_label,
     figure_inputs,
+    judge_links,
     layout_radius_label,
 )
 from app.server.files import DataFile, DataFolders, ExportFolder, Scrubber, default_export_dir
+from app.server.network import ACTIVITY_FLOOR, match_text, pose_cell_image, template_image
 from app.server.params import (
     ADVANCED_SLIDERS,
     ALL_SLIDERS,
@@ -88,7 +92,7 @@ from cogmap_core.event_file import KIND_LINK
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, EventLog, SlamSession
-from cogmap_core.sources.detect import KINDS, CameraOptions, LogOptions, Source
+from cogmap_core.sources.detect import KINDS, CameraOptions, LogOptions, Source, open_source
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -104,6 +108,8 @@ SPEEDS: dict[str, float] = {
     "20x": 20.0,
     "max": math.inf,
 }
+#: The smallest extent the scene's sizes and framing are chosen for, in layout radii.
+SPAN_PER_RADIUS = 40.0
 #: A viewer joining after this much data was replayed is told so (s).
 LATE_JOIN_S = 5.0
 RECENT_LINKS = 8
@@ -229,18 +235,21 @@ class CogmapApp:
         self._image_limit = _RateLimit(scene_hz)
         self._chart_limit = _RateLimit(1.0)
         self._figures_limit = _RateLimit(1.0)
+        self._pose_cells_limit = _RateLimit(4.0)
+        self._rebuild_shown: tuple[MapParams, tuple[MapMode, ...]] | None = None
+        self._state_shown: PlaybackState | None = None
         self._views_limit = _RateLimit(2.0)
         self._figures: dict[MapMode, MapFigures] = {}
         self._figures_key: dict[MapMode, tuple[int, ...]] = {}
         self.stats_version = 0
-        self._false_times = np.zeros(0)
+        self._links: LinkJudgement = NO_LINKS  # the log's links and the truth's verdicts
         self._false_key: tuple[int, int] | None = None
         self._odometry_key: tuple[int, int] | None = None
         self._odometry = np.zeros((0, 3))
         # set while the app itself sets a control (per thread: viser runs callbacks on a
         # pool, and another viewer's change must not be swallowed meanwhile)
         self._setting = threading.local()
-        self._pending_frame: tuple[Frame, int | None] | None = None
+        self._pending_frame: tuple[Frame | EventStep, int | None, int] | None = None
         self.status_note = ""
         self._typed: dict[str, tuple[str, str]] = {}  # box -> (normal text, message)
         self._default_modes: tuple[MapMode, ...] = (MapMode.COMPACT,)
@@ -343,11 +352,16 @@ class CogmapApp:
             brand_color=(30, 140, 60),
         )
         gui.set_panel_label("cogmap · compact cognitive map")
+        # docked at the right: the scene's canvas ends where the panel begins, so nothing of the
+        # map lies under the panel, whatever the window, the screen's pixel ratio or the
+        # resolution viser renders at (a floating panel covered a part nobody could compute)
+        gui.main_panel.dock_right()
         self.head_html = gui.add_html(head_html(self.static_dir))
         self.status_html = gui.add_html(self._status_content())
 
-        self.view_folder = gui.add_folder("View — yours")
+        # what a click picked comes first: it shows next to the map, never below the fold
         self.inspect_folder = gui.add_folder("Inspect — yours")
+        self.view_folder = gui.add_folder("View — yours")
         self.compare_folder = gui.add_folder("Compare with a pinned map — yours")
 
         with gui.add_folder("Playback — shared"):
@@ -367,7 +381,7 @@ class CogmapApp:
         self.play_button.on_click(lambda _: self._toggle_play())
         self.speed_dropdown.on_update(lambda _: self._on_speed())
         self.step_button.on_click(lambda _: self.replay.step())
-        self.restart_button.on_click(lambda _: self.replay.restart())
+        self.restart_button.on_click(lambda _: self.restart())
         self.seek_slider.on_update(lambda _: self._on_seek())
         self.seek_box.on_update(lambda _: self._on_seek_box())
 
@@ -377,7 +391,23 @@ class CogmapApp:
             )
             self.template_md = gui.add_markdown("view template: –")
             self.links_html = gui.add_html("")  # logs: the latest links and their scores
+            self.built_html = gui.add_html("")  # what the maps were built with; a rebuild
             self.counters_html = gui.add_html("")
+
+        with gui.add_folder("Network behind the map — shared"):
+            self.network_html = gui.add_html(
+                '<div class="cogmap-note" id="cogmap-network">The front end\'s view templates '
+                "and pose cells show when the replay runs.</div>"
+            )
+            self.template_image = gui.add_image(
+                np.full((20, 60, 3), 255, np.uint8), label="current view · matched template",
+                format="png",
+            )  # fmt: skip
+            self.match_html = gui.add_html("")
+            self.pose_cells_image = gui.add_image(
+                np.full((30, 42, 3), 255, np.uint8), label="pose cells (x, y, θ)", format="jpeg"
+            )
+            self.pose_cells_html = gui.add_html("")
 
         with gui.add_folder("Map parameters — shared"):
             self.param_sliders: dict[str, viser.GuiSliderHandle[float]] = {}
@@ -422,16 +452,15 @@ class CogmapApp:
         self.sizes_button.on_click(lambda event: self._download(event.client, "sizes"))
         self.replay_button.on_click(lambda event: self._save_replay(event.client))
 
-        with gui.add_folder("Open another bag — shared", expand_by_default=False):
+        with gui.add_folder("Open another bag or log — shared", expand_by_default=False):
             names = self._list_bags()
-            self.bag_dropdown = gui.add_dropdown(
-                "bag", names, initial_value=names[0], hint="the bags in the server's data folders"
-            )
+            self.bag_dropdown = gui.add_dropdown("bag or log", names, initial_value=names[0])
             self.refresh_button = gui.add_button("refresh the list", icon=viser.Icon.REFRESH)
             self.open_button = gui.add_button("open", icon=viser.Icon.FOLDER_OPEN)
             self.open_md = gui.add_html(
-                '<div class="cogmap-note" id="cogmap-open">A bag of the data folders; the '
-                "replay starts over with it, for everyone.</div>"
+                '<div class="cogmap-note" id="cogmap-open">A bag, or a log of odometry and place '
+                "recognition (TUC or CSV), of the server's data folders; the replay starts over "
+                "with it, for everyone.</div>"
             )
         self.refresh_button.on_click(lambda _: self.refresh_bags())
         self.open_button.on_click(lambda _: self._open_chosen())
@@ -559,12 +588,13 @@ class CogmapApp:
         with self.replay.lock:
             for mode in view.state.shown:
                 local = point - np.array([offsets[mode.value], 0.0])
+                figures = self._figures.get(mode)
                 found = nearest_pick(
                     self.replay.session.maps[mode],
                     mode,
                     local,
                     tolerance,
-                    self._false_times,
+                    frozenset() if figures is None else figures.false_edges,
                     self.streamer.layers[mode].point_size / 2,
                 )
                 if found is not None and (best is None or found[0] < best[0]):
@@ -776,13 +806,19 @@ class CogmapApp:
 
     # ================================================================== listener (worker thread)
     def on_status(self, replay: Replay) -> None:
-        """Playback state changed (rate-limited except for state changes)."""
-        if self._status_limit.due(forced=replay.state is not PlaybackState.PLAYING):
+        """Playback state changed (rate-limited except for state changes and rebuilds)."""
+        rebuilding = replay.rebuilding
+        forced = (
+            replay.state is not PlaybackState.PLAYING
+            or replay.state is not self._state_shown
+            or rebuilding != self._rebuild_shown
+        )
+        if self._status_limit.due(forced=forced):
             self._update_status()
 
     def on_frame(self, replay: Replay, frame: Frame | EventStep, view_template: int | None) -> None:
         """Show the camera image (rate-limited; the latest one is shown when playback stops)."""
-        self._pending_frame = (frame, view_template)
+        self._pending_frame = (frame, view_template, replay.cursor - 1)
         if self._image_limit.due(not replay.playing):
             self._show_frame()
 
@@ -791,24 +827,90 @@ class CogmapApp:
         if pending is None:
             return
         self._pending_frame = None
-        frame, view_template = pending
+        frame, view_template, index = pending
         if isinstance(frame, EventStep):  # a log: no camera; the latest links' scores instead
             self._show_links(frame)
             return
         r = self.replay
-        if not self.camera_image.visible:  # (hidden while a log was replayed)
-            self.camera_image.visible = True
+        for handle in (self.camera_image, self.template_image):
+            if not handle.visible:  # (hidden while a log was replayed)
+                handle.visible = True
         self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
-            f"view template **{template}** · frame {r.cursor} / {r.total_frames} · "
+            f"view template **{template}** · frame {index + 1} / {r.total_frames} · "
             f"t = {frame.time:.2f} s"
+        )
+        self._show_network(frame, view_template, index)
+
+    def _show_network(self, frame: Frame, view_template: int | None, index: int) -> None:
+        """The view template panel and the pose cells (as OpenRatSLAM shows them)."""
+        r = self.replay
+        frontend = r.session.frontend
+        local_view = frontend.local_view
+        current = local_view.make_template(frame.image)
+        matched = None
+        if view_template is not None and 0 <= view_template < local_view.count:
+            matched = local_view.template(view_template)
+        self.template_image.image = template_image(current, matched)
+        k = index - r.base_frames
+        error = r.view_errors[k] if 0 <= k < len(r.view_errors) else math.nan
+        threshold = frontend.config.vt_match_threshold
+        text = match_text(view_template, None if math.isnan(error) else error, threshold,
+                          math.isnan(error))  # fmt: skip
+        self.match_html.content = (
+            f'<div class="cogmap-note" id="cogmap-match">{html.escape(text)} '
+            f"({local_view.count} templates stored)</div>"
+        )
+        note = (
+            '<div class="cogmap-note" id="cogmap-network">Left: the camera image as the local '
+            "view cells see it (cropped, resampled, normalised); right: the view template it "
+            "matched.</div>"
+        )
+        if self.network_html.content != note:
+            self.network_html.content = note
+        processed = r.session.log.frames
+        if index + 1 < processed:  # replaying cached events: the front end is further on
+            if self.pose_cells_image.visible:
+                self.pose_cells_image.visible = False
+            self.pose_cells_html.content = (
+                '<div class="cogmap-note" id="cogmap-pose-cells">Pose cells: the front end last '
+                f"ran at frame {processed}; this frame replays its cached events. They show "
+                "again once playback passes that frame.</div>"
+            )
+            return
+        if not self._pose_cells_limit.due(not r.playing):
+            return
+        activity = frontend.pose_cell_activity
+        peak = frontend.pose_cell_peak
+        if not self.pose_cells_image.visible:
+            self.pose_cells_image.visible = True
+        self.pose_cells_image.image = pose_cell_image(activity, peak)
+        n_th = activity.shape[0]
+        x, y, th = peak
+        self.pose_cells_html.content = (
+            '<div class="cogmap-note" id="cogmap-pose-cells">Activity of the '
+            f"{activity.shape[2]} × {activity.shape[1]} × {n_th} pose-cell network at frame "
+            f"{index + 1} (dots: cells above {ACTIVITY_FLOOR:.0%} of the peak, larger and "
+            f"yellower when stronger); peak (ring) at x {x:.1f}, y {y:.1f}, θ {th:.1f} cells "
+            f"({math.degrees(th * 2 * math.pi / n_th):.0f}°).</div>"
         )
 
     def _show_links(self, step: EventStep) -> None:
         """Hide the camera panel; list the latest place-recognition links with their scores."""
-        if self.camera_image.visible:
-            self.camera_image.visible = False
+        for handle in (self.camera_image, self.template_image, self.pose_cells_image):
+            if handle.visible:
+                handle.visible = False
+        note = (
+            '<div class="cogmap-note" id="cogmap-network">No camera: this input is a log of '
+            "odometry and place recognition, whose links come as they are. There is no front end "
+            "here (no view templates, no pose cells); the latest links are under "
+            "<i>Live</i>.</div>"
+        )
+        if self.network_html.content != note:
+            self.network_html.content = note
+            self.match_html.content = ""
+            self.pose_cells_html.content = ""
         with self.replay.lock:
             recent = recent_links(self.replay.session.log, self.replay.cursor, RECENT_LINKS)
         rows = "".join(
@@ -848,7 +950,8 @@ class CogmapApp:
             try:
                 view.refresh()
             except Exception:  # a tab that went away must not stop the others
-                traceback.print_exc()
+                if not view.closed and self._connected(view.client):
+                    traceback.print_exc()
 
     # ------------------------------------------------------------------ page content
     def _update_figures(self, forced: bool, modes: tuple[MapMode, ...]) -> None:
@@ -908,18 +1011,20 @@ class CogmapApp:
                 cmap = replay.session.maps[mode]
                 mkey = (id(cmap), cmap.num_vertices, cmap.num_edges, len(cmap.optimizations),
                         log_.frames)  # fmt: skip
-                if self._figures_key.get(mode) != mkey:
+                if self._figures_key.get(mode) != mkey or false_inputs is not None:
                     todo.append((mode, mkey, figure_inputs(log_, cmap)))
-        false_times = None if false_inputs is None else false_link_times(false_inputs, judging)
-        computed = [(mode, mkey, compute_figures(inputs, judging)) for mode, mkey, inputs in todo]
-        if false_times is None and not computed:
+        links = self._links if false_inputs is None else judge_links(false_inputs, judging)
+        computed = [
+            (mode, mkey, compute_figures(inputs, judging, links)) for mode, mkey, inputs in todo
+        ]
+        if false_inputs is None and not computed:
             return
         with replay.lock, self.scene_lock:
             if replay is not self.replay:
                 return
-            if false_times is not None:
+            if false_inputs is not None:
                 self._false_key = false_key
-                self._false_times = false_times
+                self._links = links
             for mode, mkey, figures in computed:
                 self._figures_key[mode] = mkey
                 self._figures[mode] = figures
@@ -939,14 +1044,14 @@ class CogmapApp:
     def _publish_scene(self) -> None:
         session = self.replay.session
         log_ = session.log
+        # sizes, the grid and the framing suit the kind of input: a maze (8 cm layout radius:
+        # at least 3.2 m) or a building (50 cm: at least 20 m)
+        self.streamer.min_span = SPAN_PER_RADIUS * session.evaluation.layout_radius
         truth = log_.ground_truth if len(log_.ground_truth) else None
         count = min(self.replay.cursor, len(log_.ground_truth))
         extras = {
-            mode: MapExtras(
-                self._figures[mode].truth_transform if mode in self._figures else None,
-                self._false_times,
-            )
-            for mode in MapMode
+            mode: MapExtras(figures.truth_transform, figures.false_edges)
+            for mode, figures in self._figures.items()
         }
         odometry = self._dead_reckoning() if self.streamer.show_odometry else None
         self.streamer.publish(
@@ -990,9 +1095,13 @@ class CogmapApp:
         )
 
     def _update_status(self, force: bool = False) -> None:
+        self._state_shown = self.replay.state
         content = self._status_content()
         if self.status_html.content != content:
             self.status_html.content = content
+        built = self._built_content()
+        if self.built_html.content != built:
+            self.built_html.content = built
         r = self.replay
         if r.duration > 0 and self.seek_slider.max != round(r.duration, 1):
             self.seek_slider.max = round(r.duration, 1)
@@ -1016,6 +1125,54 @@ class CogmapApp:
                 self._setting.seek = False
         self._sync_play_button()
 
+    def _built_content(self) -> str:
+        """What the shown maps were built with, and which are being rebuilt (for what)."""
+        r = self.replay
+        rebuilding = r.rebuilding
+        self._rebuild_shown = rebuilding
+        maps = r.session.maps.maps
+        groups: dict[MapParams, list[str]] = {}
+        for mode in ALL_MODES:
+            if mode in maps:
+                groups.setdefault(maps[mode].params, []).append(mode.value.replace("_", " "))
+
+        def described(params: MapParams) -> str:
+            return " · ".join(
+                f"{spec.label} {format_value(getattr(params, spec.name))}" for spec in ALL_SLIDERS
+            )
+
+        if len(groups) == 1:
+            lines = [f"<b>maps built with</b> {html.escape(described(next(iter(groups))))}"]
+        else:
+            lines = [
+                f"<b>{', '.join(names)} built with</b> {html.escape(described(params))}"
+                for params, names in groups.items()
+            ]
+        content = '<div class="cogmap-note" id="cogmap-built">' + "<br>".join(lines) + "</div>"
+        if rebuilding is not None:
+            params, pending = rebuilding
+            changes = []
+            for spec in ALL_SLIDERS:
+                olds = {getattr(maps[m].params, spec.name) for m in pending if m in maps}
+                new = getattr(params, spec.name)
+                if olds and olds != {new}:
+                    was = ", ".join(format_value(v) for v in sorted(olds))
+                    changes.append(f"{spec.label} = {format_value(new)} (was {was})")
+            names = ", ".join(m.value.replace("_", " ") for m in pending)
+            what = "; ".join(changes) or "the new parameters"
+            content = (
+                '<div class="cogmap-note cogmap-busy" id="cogmap-rebuild">rebuilding '
+                f"{html.escape(names)} for {html.escape(what)} …</div>" + content
+            )
+        return content
+
+    def restart(self) -> None:
+        """Back to the first frame and play (the restart button; after the end as before it)."""
+        self.replay.restart()
+        self.replay.play()
+        self._sync_play_button()
+        self._update_status(force=True)
+
     def _loop_closures_detected(self) -> int:
         log_ = self.replay.session.log
         k = self.replay.cursor
@@ -1027,8 +1184,13 @@ class CogmapApp:
         figures = self._figures.get(mode)
         fidelity = None if figures is None else figures.fidelity
         ate = None if figures is None else figures.ate
+        false = None if figures is None else figures.false_count
+        links = None if figures is None else figures.links
         c = cmap.counters
-        false = self.streamer.layers[mode].false_count if mode in self.streamer.layers else 0
+
+        def count(value: int | None) -> str:
+            return "–" if value is None else str(value)
+
         return {
             "vertices": str(cmap.num_vertices),
             "edges": str(cmap.num_edges),
@@ -1038,23 +1200,31 @@ class CogmapApp:
             "ate": "–" if ate is None else f"{ate:.3f}",
             "completeness": _share(None if fidelity is None else fidelity.completeness),
             "correctness": _share(None if fidelity is None else fidelity.correctness),
+            "false": count(false),
+            "links": count(None if links is None else links.links),
+            "duplicates": count(None if links is None else links.duplicates),
+            "refused_links": count(None if links is None else links.refused),
+            "made": count(None if links is None else links.made),
+            "removed": count(None if links is None else links.removed),
             "proposed": str(c.proposed),
             "declined": str(c.declined),
             "integrated": str(c.integrated),
             "short_edges": str(c.short_edges),
             "refused": str(c.refused_relocalisations),
-            "false": str(false),
         }
 
     def _update_counters(self) -> None:
         r = self.replay
         session = r.session
         t = 0.0 if math.isnan(r.frame_time) else r.frame_time
+        detected = self._loop_closures_detected()
+        false = self._links.false_before(detected)
+        judged = false_link_label(session.evaluation)
         rows = [
             ("time", "time", f"{t:.1f} / {r.duration:.1f} s"),
             ("frames", "frames", f"{r.cursor} / {r.total_frames}"),
-            ("loops-detected", "loop closures detected", str(self._loop_closures_detected())),
-            ("loops-false", "… of them false (ground truth)", str(self._false_times.size)),
+            ("loops-detected", "loop closures detected (links)", str(detected)),
+            ("loops-false", "… of them false (ground truth)", "–" if false is None else str(false)),
         ]
         n = len(ALL_MODES)
         body = "".join(
@@ -1072,6 +1242,16 @@ class CogmapApp:
                     ("loops", "loop-closure edges"),
                     ("clusters", "clusters"),
                     ("optimizations", "optimisations"),
+                ),
+            ),
+            (
+                "where the links went",
+                (
+                    ("links", "links received"),
+                    ("duplicates", "duplicates (pair already joined)"),
+                    ("refused_links", "refused by the relocalisation test"),
+                    ("made", "loop-closure edges made"),
+                    ("removed", "… of them merged or removed since"),
                 ),
             ),
             (
@@ -1102,9 +1282,16 @@ class CogmapApp:
                     f'<td id="cogmap-{m.value}-{key}">{figures[m][key]}</td>' for m in ALL_MODES
                 )
                 body += f"<tr><td>{label}</td>{cells}</tr>"
+        note = (
+            '<div class="cogmap-note" id="cogmap-counters-note">A link is false when the ground '
+            f"truth puts its two places apart ({html.escape(judged)}). <b>False loop closures "
+            "in the map</b>: the map's loop-closure edges made from a link the ground truth "
+            "calls false (as in summary.json). Links that join a pair already joined add no "
+            "edge (duplicates): on the first lap most links are.</div>"
+        )
         content = (
             f'<table class="cogmap-table" id="cogmap-counters"><thead><tr><th></th>{head}'
-            f"</tr></thead><tbody>{body}</tbody></table>"
+            f"</tr></thead><tbody>{body}</tbody></table>{note}"
         )
         if self.counters_html.content != content:
             self.counters_html.content = content
@@ -1113,9 +1300,11 @@ class CogmapApp:
         maps = dict(self.replay.session.maps.maps)
         data = chart_data(maps, self.replay.data_time)  # session time (bag time unless resuming)
         top = y_top(max(float(np.max(series)) for series in data[SIZE_SERIES]))
+        end = x_end(float(data[0][-1]))
         with self.server.atomic():
-            if self.chart.scales != chart_options(top)["scales"]:
-                self.chart.scales = chart_options(top)["scales"]  # type: ignore[assignment]
+            scales = chart_options(top, end)["scales"]
+            if self.chart.scales != scales:
+                self.chart.scales = scales  # type: ignore[assignment]
             self.chart.data = data
             series = chart_series(maps)
             if tuple(self.chart.series) != series:
@@ -1155,9 +1344,12 @@ class CogmapApp:
         if cmap.optimizations:
             table = (
                 '<table class="cogmap-table" id="cogmap-optimizations"><thead><tr>'
-                "<th>t (s)</th><th>cluster</th><th>edges</th><th>V</th><th>iters</th>"
+                "<th>t (s)</th><th>cluster</th><th>links</th><th>V</th><th>iters</th>"
                 "<th>ms</th><th>merged</th><th>short</th></tr></thead>"
                 f"<tbody>{rows}</tbody></table>"
+                '<div class="cogmap-note">links: the loop closures the front end detected in '
+                "the cluster (the three maps share one schedule); the map keeps fewer "
+                "loop-closure edges (duplicates, refused, merged: see <i>Live</i>).</div>"
             )
         latency = ""
         last = self.replay.last_completed_rebuild()
@@ -1292,12 +1484,14 @@ class CogmapApp:
         return thread
 
     def open_bag(self, name: str) -> bool:
-        """Replay the bag listed as ``name`` (in the data folders) instead; errors go to the page.
+        """Replay the bag or log listed as ``name`` (in the data folders); errors go to the page.
 
         Only the names of :meth:`refresh_bags`' list are opened; anything else -- a path, a
         missing file, a folder -- gets the same one line. The file is checked again (a regular
         file inside its folder, not too large) and opened by its resolved path, then checked
-        (a bag, with camera frames) before the current replay is replaced.
+        (a bag with camera frames, or a log of odometry and place recognition read whole, as
+        ``cogmap serve FILE`` reads it) before the current replay is replaced. A bag after a
+        log (or a log after a bag) starts from its kind's default parameters.
         """
         chosen = self._bags.get(name)
         if chosen is None:
@@ -1312,12 +1506,20 @@ class CogmapApp:
         reader = None
         # opened once here, to refuse it before the running replay stops (the reader names what
         # is wrong: neither a ROS 1 bag nor a ROS 2 bag, ...), then handed over to the new replay
+        log_options = LogOptions()
         try:
             chosen = self.data.check(chosen)
-            reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
+            if chosen.kind == "bag":
+                reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
+            else:  # a log: read (and checked) whole, as cogmap serve FILE reads it
+                reader = open_source(chosen.path, chosen.kind, log=log_options)
             frames = reader.info.frame_count
             if frames == 0:
-                problem = f"{name} has no camera frames on the image topic"
+                problem = (
+                    f"{name} has no camera frames on the image topic"
+                    if chosen.kind == "bag"
+                    else f"{name} has no odometry to map"
+                )
         except CogmapError as exc:
             problem = self.scrubber.scrub(str(exc))
         except Exception as exc:
@@ -1330,32 +1532,36 @@ class CogmapApp:
             return False
         assert reader is not None
         path = chosen.path
+        kind = KINDS[chosen.kind]
         with self._switch_lock:
             old = self.replay
             params = old.params
             speed = old.speed
-            from_log = not old.has_camera
-            if from_log:  # a log's map parameters are not a bag's: start from the bag's own
-                params = self.defaults = KINDS["bag"].map_params
+            switched = kind.has_camera != old.has_camera
+            if switched:  # a log's map parameters are not a bag's: start from the kind's own
+                params = self.defaults = kind.map_params
             old.stop()  # joins its worker, which may be waiting for the replay lock
             with self._replay_lock, self.scene_lock:
                 self.streamer.reset()
                 self._figures.clear()
                 self._figures_key.clear()
                 self._false_key = None
-                self._false_times = np.zeros(0)
+                self._links = NO_LINKS
                 self._odometry_key = None
-                self.replay = self._make_replay(  # (a bag: open_bag took it; not sniffed again)
-                    path, params, speed, True, fmt="bag", opened=reader
+                self.replay = self._make_replay(  # (opened here: not sniffed again)
+                    path, params, speed, True, fmt=chosen.kind, log=log_options, opened=reader
                 )
                 self.started_at = time.monotonic()
                 self.links_html.content = ""  # (a log's latest links)
             self.views_changed()
             self.replay.start()
-        if from_log:
+        for view in list(self.views.values()):  # what a tab picked was the old input's
+            view.select(None)
+        if switched:
             self.reset_button.label = self._reset_label()
-            self.reset_params()  # the sliders show the bag's defaults (no rebuild: in use)
-        self._open_message(f"opened {name} ({frames} frames); replaying it for everyone")
+            self.reset_params()  # the sliders show the kind's defaults (no rebuild: in use)
+        what = "frames" if kind.has_camera else "steps"
+        self._open_message(f"opened {name} ({frames} {what}); replaying it for everyone")
         self._sync_play_button()
         return True
 

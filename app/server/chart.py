@@ -8,6 +8,11 @@ only under the mouse (and "--" otherwise), so the legend's labels carry the curr
 Every series has a value at every x. uPlot takes NaN for a number (one NaN and the axis range
 is lost), so a marker series is far below the chart where it has no marker, and the y range is
 fixed -- a round number above the largest size, changed only when the maps outgrow it.
+
+The x range is set too (:func:`x_end`: a round number just above the data time), not left to the
+browser: viser's chart keeps an open tab's x range *relative to the data's range when the tab
+opened*, so a tab open during the replay showed 0-3.7 s at 37 s, and 0-1 s after another bag was
+opened. A new range makes the browser draw the chart anew, once per round number passed.
 """
 
 from __future__ import annotations
@@ -72,15 +77,39 @@ def y_top(largest: float) -> float:
     return 10.0 ** (exponent + 1)
 
 
-def chart_options(top: float = 10.0) -> dict[str, object]:
-    """Scales, axes and legend of the chart (x in data seconds, y up to ``top``)."""
+#: Round ends of the x axis (x 10^k).
+X_STEPS = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
+
+
+def x_end(data_time: float) -> float:
+    """The end of the x axis: the smallest round number (:data:`X_STEPS`) at least ``data_time``.
+
+    At least 1 s (before any data).
+    """
+    t = max(float(data_time), 1.0) if math.isfinite(data_time) else 1.0
+    exponent = math.floor(math.log10(t))
+    for e in (exponent, exponent + 1):
+        for step in X_STEPS:
+            end = step * 10.0**e
+            if end >= t * (1 - 1e-12):
+                return float(round(end, 9))
+    return 10.0 ** (exponent + 1)
+
+
+def chart_options(top: float = 10.0, end: float = 1.0) -> dict[str, object]:
+    """Scales, axes, legend and padding (x in data seconds up to ``end``, y up to ``top``).
+
+    The y axis is wide enough for "30,000" and the plot starts below the top of the chart, so
+    the top tick's label is never cut.
+    """
     return {
-        "scales": {"x": {"time": False}, "y": {"range": (0.0, top)}},
+        "scales": {"x": {"time": False, "range": (0.0, end)}, "y": {"range": (0.0, top)}},
         "axes": (
-            {"label": "data time (s)", "size": 36},
-            {"label": "vertices / edges", "size": 52},
+            {"label": "data time (s)", "size": 40},
+            {"label": "vertices / edges", "size": 64},
         ),
         "legend": {"live": False},
+        "padding": (14, 24, 0, 0),
     }
 
 

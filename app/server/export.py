@@ -28,9 +28,10 @@ import numpy as np
 
 from app.pipeline import read_warnings, session_summary, source_description, write_sizes_csv
 from app.server.access import AccessPolicy, guarded_server
-from app.server.figures import false_link_times, truth_transform
+from app.server.figures import judge_links, map_false_edges, truth_transform
 from app.server.files import REPLAY_MARKER, is_cogmap_replay
 from app.server.scene import MapExtras, SceneStreamer
+from app.server.view import PLAN_FOV
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
@@ -225,10 +226,16 @@ def html_replay(
     try:
         streamer = SceneStreamer(server, modes)
         streamer.show(modes)
+        streamer.min_span = 40.0 * (judging or EvaluationSettings()).layout_radius
         x0, x1, y0, y1 = _dead_reckoning_extent(log.events)
         span = max(x1 - x0, y1 - y0, 1.0) * (len(modes) + 1) / 2
         cx, cy = (x0 + x1) / 2 + (len(modes) - 1) * (x1 - x0 + 0.5) / 2, (y0 + y1) / 2
-        server.initial_camera.position = (cx, cy - 0.05 * span, 1.25 * span + 0.5)
+        # the plan view, as on the page: straight down, north up, a narrow field of view
+        distance = 1.3 * span / (2.0 * math.tan(PLAN_FOV / 2.0))
+        server.initial_camera.fov = PLAN_FOV
+        server.initial_camera.near = 0.2 * distance
+        server.initial_camera.far = 5.0 * distance
+        server.initial_camera.position = (cx, cy - 1e-4 * distance, distance)
         server.initial_camera.look_at = (cx, cy, 0.0)
         serializer = server.get_scene_serializer()
         maps = {m: CognitiveMap(m, params) for m in modes}
@@ -236,7 +243,7 @@ def html_replay(
         step = max(1, math.ceil(n / max(1, keyframes)))
         pause = seconds / max(1, math.ceil(n / step))
         truth = log.ground_truth if log.has_ground_truth() else None
-        false_times = false_link_times(log, judging)
+        links = judge_links(log, judging)
         done = 0
         for k in range(step, n + step, step):
             k = min(k, n)
@@ -247,7 +254,10 @@ def html_replay(
             if k == n and finish:
                 for cmap in maps.values():
                     cmap.finish(log.frame_time[-1])
-            extras = {m: MapExtras(truth_transform(log, c), false_times) for m, c in maps.items()}
+            extras = {
+                m: MapExtras(truth_transform(log, c), map_false_edges(c, links))
+                for m, c in maps.items()
+            }
             streamer.publish(maps, truth, k, extras, duration=log.frame_time[-1])
             serializer.insert_sleep(pause)
         duration = log.frame_time[-1] - log.frame_time[0] if n else 0.0

@@ -7,10 +7,14 @@ a folder other than the export folder itself. A file in the way is replaced only
 regular file that starts like a cogmap replay (the first :data:`HEAD_BYTES` are read, never the
 whole file), and the folder holds at most :data:`MAX_EXPORTS` replays.
 
-"Open another bag" offers the bags of the **data folders** (``--data-dir``, repeatable; default
-the served input's folder) in a list the server makes (:meth:`DataFolders.listing`): regular
-files only (``lstat``: a FIFO, a device or a socket is never listed, nor opened), with a bag's
-suffix or a ROS 1 bag's first bytes, up to :data:`MAX_DEPTH` folders deep; a symbolic link is
+"Open another bag or log" offers the bags and logs of the **data folders** (``--data-dir``,
+repeatable; default the served input's folder) in a list the server makes
+(:meth:`DataFolders.listing`): regular files only (``lstat``: a FIFO, a device or a socket is
+never listed, nor opened), with a bag's suffix or a ROS 1 bag's first bytes, or logs of
+odometry and place recognition as ``cogmap serve FILE`` takes them -- a ``.txt`` file whose
+first data line is a TUC input line (``odom2`` or ``loop``; not its ground truth), an
+``*_odometry.csv`` file of CSV rows (its loops and ground truth are found beside it), the first
+:data:`HEAD_BYTES` read -- up to :data:`MAX_DEPTH` folders deep; a symbolic link is
 followed only to a regular file inside the same data folder. A choice is checked again when it
 is opened (still a regular file inside the folder, at most :data:`MAX_BAG_BYTES`), and the file
 is then opened by its resolved path. Whatever is not in the list -- a path that does not exist,
@@ -28,8 +32,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cogmap_core.datasets.cache import cache_dir
+from cogmap_core.datasets.odometry_csv import looks_like_csv
+from cogmap_core.datasets.tuc import INPUT_FIELDS
 from cogmap_core.errors import InputFileError, OutputError
 from cogmap_core.fileio import check_writable, output_error
+from cogmap_core.sources.log_text import BOM
 
 #: What an exported replay starts with (in its ``<head>``); a file in the way without it is
 #: never replaced.
@@ -152,11 +159,12 @@ class ExportFolder:
 
 @dataclass(frozen=True, slots=True)
 class DataFile:
-    """A bag the page may open: its ``name`` on the page and where it is."""
+    """A bag or log the page may open: its ``name`` on the page, where it is, its kind."""
 
     name: str
     path: Path
     folder: Path  # the data folder's real path
+    kind: str = "bag"  # bag, tuc or csv (cogmap_core.sources.detect.KINDS)
 
 
 class DataFolders:
@@ -184,9 +192,9 @@ class DataFolders:
         found: list[DataFile] = []
         budget = [MAX_SCANNED]
         for label, _, real in self.folders:
-            for relative, path in _walk(real, real, 0, budget):
+            for relative, path, kind in _walk(real, real, 0, budget):
                 name = f"{label}/{relative}" if label else relative
-                found.append(DataFile(name, path, real))
+                found.append(DataFile(name, path, real, kind))
                 if len(found) >= MAX_LISTED:
                     return sorted(found, key=lambda f: f.name)
         return sorted(found, key=lambda f: f.name)
@@ -212,7 +220,7 @@ class DataFolders:
                 f"{chosen.name} has {info.st_size / 1e9:,.1f} GB, more than the "
                 f"{MAX_BAG_BYTES / 1024**3:.0f} GiB a bag opened from the page may have"
             )
-        return DataFile(chosen.name, real, chosen.folder)
+        return DataFile(chosen.name, real, chosen.folder, chosen.kind)
 
     def shown(self, path: str | Path) -> str:
         """How the page names the file ``path``: relative to its data folder, else its name."""
@@ -259,8 +267,10 @@ def _inside(path: Path, folder: Path) -> bool:
         return False
 
 
-def _walk(root: Path, folder: Path, depth: int, budget: list[int]) -> Iterator[tuple[str, Path]]:
-    """``(relative name, real path)`` of the bags below ``folder`` (module doc)."""
+def _walk(
+    root: Path, folder: Path, depth: int, budget: list[int]
+) -> Iterator[tuple[str, Path, str]]:
+    """``(relative name, real path, kind)`` of the bags and logs below ``folder`` (module doc)."""
     try:
         with os.scandir(folder) as scan:
             entries = sorted(scan, key=lambda e: e.name)
@@ -289,7 +299,29 @@ def _walk(root: Path, folder: Path, depth: int, budget: list[int]) -> Iterator[t
         except OSError:
             continue
         if real.suffix.lower() in BAG_SUFFIXES or _is_ros1_bag(real):
-            yield str(path.relative_to(root)), real
+            yield str(path.relative_to(root)), real, "bag"
+        else:
+            kind = _log_kind(real)
+            if kind is not None:
+                yield str(path.relative_to(root)), real, kind
+
+
+def _log_kind(path: Path) -> str | None:
+    """``tuc`` or ``csv`` for a log ``cogmap serve`` takes (module doc), else None."""
+    name = path.name.lower()
+    if not (name.endswith(".txt") or name.endswith("_odometry.csv")):
+        return None
+    head = read_head(path)
+    if head is None:
+        return None
+    for raw in head.removeprefix(BOM).decode("utf-8", errors="replace").splitlines()[:200]:
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        if name.endswith(".txt"):
+            return "tuc" if line.split()[0] in INPUT_FIELDS else None
+        return "csv" if looks_like_csv(line) else None
+    return None
 
 
 def _is_ros1_bag(path: Path) -> bool:

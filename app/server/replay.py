@@ -272,8 +272,12 @@ class Replay:
         self._opened = opened  # handed over by the caller, used by _open
         self.duration = 0.0
         self.total_frames = 0
-        # per frame of the bag, the view template it matched (-1: none); 8 bytes a frame
+        # per frame of the bag, the view template it matched (-1: none) and the match error
+        # (NaN: a new template, or none); 16 bytes a frame
         self.view_templates = array.array("q")
+        self.view_errors = array.array("d")
+        #: a parameter change being rebuilt: (its parameters, the maps still to show), or None
+        self.rebuilding: tuple[MapParams, tuple[MapMode, ...]] | None = None
         self.rebuilds: list[RebuildRecord] = []
         self.frame_time = math.nan  # data time of the last frame applied
         self.processing_s = 0.0  # wall time spent applying frames (front end + maps)
@@ -670,6 +674,9 @@ class Replay:
             else:
                 out = session.process(frame)
                 self.view_templates.append(-1 if out.view_template is None else out.view_template)
+                last = session.frontend.last_view if isinstance(frame, Frame) else None
+                error = None if last is None or last.is_new else last.error
+                self.view_errors.append(math.nan if error is None else error)
                 view = out.view_template
             self.cursor = k + 1
             self.frame_time = self._bag_time(frame.time)
@@ -780,15 +787,16 @@ class Replay:
             self.at_end = False
             self.frame_time = self._bag_time(log.frame_time[k - 1]) if k > base else math.nan
         if self.state is not PlaybackState.ERROR:
-            if k < log.frames:
-                start = max(0.0, self._bag_time(log.frame_time[k]) - 1e-3) if k > base else 0.0
+            if k > base:
+                # from the frame the maps now end with: it is shown (the camera at once after a
+                # seek, not an old frame until a step), then the frames after it are read
+                t = log.frame_time[k - 1]
+                before = log.frame_time[k - 2] if k - 1 > base else t - 1.0
+                start = max(0.0, self._bag_time(t) - min(1e-3, (t - before) / 2))
+                self._start_pass(start)
+                self._show_current(k)
             else:
-                start = (
-                    min(self._bag_time(log.frame_time[k - 1]) + 1e-4, self.duration)
-                    if k > base
-                    else 0.0
-                )
-            self._start_pass(start)
+                self._start_pass(0.0)
         with self._cond:
             if self.state is PlaybackState.LOADING:
                 self.state = PlaybackState.PAUSED
@@ -796,6 +804,27 @@ class Replay:
         self._update_state_locked()
         self._notify_maps(ALL_MODES, True)
         self._notify_status()
+
+    def _show_current(self, k: int) -> None:
+        """Read frame ``k - 1`` again and show it (:meth:`ReplayListener.on_frame`), not applied.
+
+        Frames before it are dropped; a frame after it is left to be read in turn.
+        """
+        expected = self.session.log.frame_time[k - 1]
+        while True:
+            frame = self._peek()
+            if frame is None or frame.time + self.time_offset > expected + _TIME_TOLERANCE:
+                return
+            self._next = None
+            if frame.time + self.time_offset >= expected - _TIME_TOLERANCE:
+                break
+        if self.time_offset:
+            frame = replace(frame, time=frame.time + self.time_offset)
+        matched = self.view_templates[k - 1 - self.base_frames] if self.view_templates else -1
+        try:
+            self.listener.on_frame(self, frame, None if matched < 0 else matched)
+        except Exception:
+            traceback.print_exc(file=sys.stderr)
 
     # ------------------------------------------------------------------ parameter rebuilds
     def _order(self) -> tuple[MapMode, ...]:
@@ -826,6 +855,24 @@ class Replay:
             with self.lock:
                 self.session.params = params
             return
+        maps = self.session.maps
+        self.rebuilding = (  # the maps the change can affect (a few may turn out unchanged)
+            params,
+            tuple(m for m in self._order() if needs_rebuild(m, maps[m].params, params)),
+        )
+        self._notify_status()  # (the page shows that the maps are being rebuilt)
+        try:
+            self._rebuild(record, params, frames, finish, generation)
+        finally:
+            self.rebuilding = None
+        with self._cond:
+            self._anchor = None
+        self._notify_maps((), True)  # the pages' "shown after" line now covers this change
+        self._notify_status()
+
+    def _rebuild(
+        self, record: RebuildRecord, params: MapParams, frames: int, finish: bool, generation: int
+    ) -> None:
         log = self.session.log
         tasks = []
         unchanged: dict[MapParams, bool] = {}  # per parameters in use (the maps mostly share)
@@ -855,10 +902,6 @@ class Replay:
             record.how[built.task.mode] = "built"
             self._publish_rebuilt(record, built.task.mode, params, built.cmap, built.compute_s)
         record.completed = True
-        with self._cond:
-            self._anchor = None
-        self._notify_maps((), True)  # the pages' "shown after" line now covers this change
-        self._notify_status()
 
     def _publish_rebuilt(
         self,
@@ -873,5 +916,8 @@ class Replay:
             self._keep_replaced({mode: cmap})
             _label_params({mode: cmap}, params)
             self.session.adopt(params, {mode: cmap})
+        pending = self.rebuilding
+        if pending is not None:
+            self.rebuilding = (pending[0], tuple(m for m in pending[1] if m is not mode))
         self._notify_maps((mode,), True)
         record.published[mode] = time.perf_counter()

@@ -15,7 +15,13 @@ each viewer can show or hide it (:mod:`app.server.view` shadows these frames per
 - ``odometry/cNNNN`` -- the dead-reckoned path (odometry alone), in the map's own frame;
 - ``robot`` -- a triangle at the robot's current (dead-reckoned) pose.
 
-- ``grid`` -- a metric grid (0.1 m cells, 1 m sections) with a 1 m scale bar under the map.
+- ``name`` -- the map's name, above its top-left corner (side by side: which map is which).
+
+Sizes follow the extent of what is mapped (:meth:`SceneStreamer.marker`): vertices, the robot and
+the grid's spacing are chosen from the ground truth's and the maps' extent, never from the map
+parameters, so a 4 m maze and a 40 m hall read alike. The metric grid with its scale bar is one
+for everything a view shows (:class:`Grid`: the default view's here, each viewer's own in
+:mod:`app.server.view`), its spacing a round number that suits the extent.
 
 Between two optimisations a map only grows at its end, so only the last chunk of each layer
 changes: :class:`ChunkedNodes` compares every chunk with what it last sent and re-sends only the
@@ -27,17 +33,30 @@ the latest state of every node, which is what a client joining late receives.
 
 from __future__ import annotations
 
-import colorsys
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from app.palette import (
+    CLUSTER_PALETTE,
+    FALSE_LOOP_COLOR,
+    GROUND_TRUTH_COLOR,
+    INK,
+    MAP_COLORS,
+    ODOMETRY_COLOR,
+    PALETTE_SIZE,
+    PINNED_COLOR,
+    ROBOT_COLOR,
+    SELECTION_COLOR,
+    cluster_color,
+)
+from app.server.figures import FalseEdges, false_edge_mask
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.edge_noise import edge_information
 from cogmap_core.map_graph import MapSnapshot
@@ -49,18 +68,26 @@ UInt8Array = NDArray[np.uint8]
 #: Items (vertices, edges, path segments) per scene node.
 CHUNK = 512
 
-MAP_COLORS: dict[MapMode, tuple[int, int, int]] = {
-    MapMode.STANDARD: (52, 101, 164),
-    MapMode.SCENE_INTEGRATION: (206, 92, 0),
-    MapMode.COMPACT: (30, 140, 60),
-}
-SEQUENTIAL_COLOR = (125, 125, 125)
-GROUND_TRUTH_COLOR = (160, 160, 160)
-ODOMETRY_COLOR = (176, 122, 64)
-FALSE_LOOP_COLOR = (220, 20, 20)
-ROBOT_COLOR = (15, 15, 15)
-PINNED_COLOR = (128, 96, 170)
-SELECTION_COLOR = (255, 196, 0)
+__all__ = [  # (with the page's colours, from app.palette)
+    "CLUSTER_PALETTE",
+    "FALSE_LOOP_COLOR",
+    "GROUND_TRUTH_COLOR",
+    "MAP_COLORS",
+    "ODOMETRY_COLOR",
+    "PALETTE_SIZE",
+    "PINNED_COLOR",
+    "ROBOT_COLOR",
+    "SELECTION_COLOR",
+    "ChunkedNodes",
+    "MapExtras",
+    "MapLayer",
+    "SceneStreamer",
+    "cluster_color",
+]
+
+# The page's colours come from app.palette: one per map everywhere (sequential edges and
+# vertices in their map's colour), red only for false loop closures, checked for colour-blind
+# readers.
 
 #: Ways to colour the edges: loop closures by cluster, every edge by time, or by its error.
 COLOURINGS: tuple[str, ...] = ("cluster", "time", "error")
@@ -77,74 +104,57 @@ LOOP_Z = 0.005
 FALSE_LOOP_Z = 0.007
 ROBOT_Z = 0.009
 
-#: Point size of vertices (m): a third of the typical edge length, within these bounds.
-VERTEX_SIZE_RANGE = (0.008, 0.03)
-
-_GOLDEN_ANGLE = 137.50776405003785
-#: Size of the precomputed cluster palette (later ids cycle through it).
-PALETTE_SIZE = 48
-
-
-def _lab(rgb: NDArray[np.float64]) -> NDArray[np.float64]:
-    """CIE L*a*b* of sRGB colours ``(n, 3)`` in 0..255 (D65): distances there match the eye."""
-    c = rgb / 255.0
-    c = np.where(c > 0.04045, ((c + 0.055) / 1.055) ** 2.4, c / 12.92)
-    xyz = c @ np.array(
-        [[0.4124, 0.2126, 0.0193], [0.3576, 0.7152, 0.1192], [0.1805, 0.0722, 0.9505]]
-    )
-    xyz /= np.array([0.95047, 1.0, 1.08883])
-    f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16.0 / 116.0)
-    return np.stack(
-        [116.0 * f[:, 1] - 16.0, 500.0 * (f[:, 0] - f[:, 1]), 200.0 * (f[:, 1] - f[:, 2])], 1
-    )
+#: Vertices are drawn this fraction of the mapped extent wide (then rounded, :func:`nice`).
+VERTEX_FRACTION = 1.0 / 260.0
+#: The robot's arrow is this many vertices long.
+ROBOT_VERTICES = 3.5
+#: The smallest extent sizes are chosen for (m): a map of two vertices is not drawn huge.
+MIN_SPAN = 3.2
 
 
-def _build_palette(size: int) -> tuple[tuple[int, int, int], ...]:
-    """Saturated colours, each as far as possible (in L*a*b*) from the ones before it.
-
-    Candidates span the hue circle at several brightnesses and saturations; the colours the
-    page uses for other things (maps, sequential edges, ground truth, robot, false loop
-    closures, the selection) count as already taken, so no cluster looks like them.
-    """
-    candidates = []
-    for hue in np.arange(0.0, 360.0, 6.0):
-        for value in (0.98, 0.78, 0.58):
-            for saturation in (1.0, 0.7):
-                r, g, b = colorsys.hsv_to_rgb(hue / 360.0, saturation, value)
-                candidates.append((round(r * 255), round(g * 255), round(b * 255)))
-    cand = np.array(candidates, dtype=np.float64)
-    lab = _lab(cand)
-    taken = [
-        *MAP_COLORS.values(),
-        SEQUENTIAL_COLOR,
-        GROUND_TRUTH_COLOR,
-        ROBOT_COLOR,
-        FALSE_LOOP_COLOR,
-        SELECTION_COLOR,
-        (255, 255, 255),
-    ]
-    nearest = np.min(
-        np.linalg.norm(lab[:, None, :] - _lab(np.array(taken, float))[None], axis=2), axis=1
-    )
-    palette: list[tuple[int, int, int]] = []
-    for _ in range(size):
-        k = int(np.argmax(nearest))  # the candidate farthest from everything taken
-        palette.append((int(cand[k, 0]), int(cand[k, 1]), int(cand[k, 2])))
-        nearest = np.minimum(nearest, np.linalg.norm(lab - lab[k], axis=1))
-    return tuple(palette)
+def nice(value: float, steps: Sequence[float] = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)) -> float:
+    """The round number (``steps`` x 10^k) nearest to ``value`` in ratio (positive values)."""
+    if not value > 0 or not math.isfinite(value):
+        return 1.0
+    exponent = math.floor(math.log10(value))
+    candidates = [m * 10.0**e for e in (exponent - 1, exponent, exponent + 1) for m in steps]
+    return min(candidates, key=lambda c: abs(math.log(c / value)))
 
 
-CLUSTER_PALETTE = _build_palette(PALETTE_SIZE)
+def nice_ceil(value: float, steps: Sequence[float] = (1.0, 2.0, 5.0)) -> float:
+    """The smallest round number (``steps`` x 10^k) at least ``value`` (positive values)."""
+    if not value > 0 or not math.isfinite(value):
+        return 1.0
+    exponent = math.floor(math.log10(value))
+    for e in (exponent, exponent + 1):
+        for m in steps:
+            if m * 10.0**e >= value * (1 - 1e-9):
+                return m * 10.0**e
+    return 10.0 ** (exponent + 1)
 
 
-def cluster_color(cluster_id: int) -> tuple[int, int, int]:
-    """The colour of loop-closure cluster ``cluster_id`` (:data:`CLUSTER_PALETTE`).
+def grid_spacing(span: float) -> tuple[float, float]:
+    """(section, cell) of a metric grid over ``span`` metres: 2-7 sections, 4-10 cells each."""
+    section = nice_ceil(max(span, 1e-3) / 6.0)
+    mantissa = round(section / 10.0 ** math.floor(math.log10(section)))
+    return section, section / {1: 10.0, 2: 4.0, 5: 5.0}.get(mantissa, 5.0)
 
-    Consecutive clusters get very different colours, none of them grey, black or like the
-    colours of the maps, the ground truth, the robot or the false loop closures; the first
-    :data:`PALETTE_SIZE` clusters all differ (beyond, the palette repeats).
-    """
-    return CLUSTER_PALETTE[int(cluster_id) % PALETTE_SIZE]
+
+Box = tuple[float, float, float, float]
+
+
+def union(a: Box | None, b: Box | None) -> Box | None:
+    """The bounding box of two boxes (xmin, xmax, ymin, ymax); either may be None."""
+    if a is None:
+        return b
+    if b is None:
+        return a
+    return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+
+
+def span_of(box: Box | None) -> float:
+    """The larger side of a box (0 for None)."""
+    return 0.0 if box is None else max(box[1] - box[0], box[3] - box[2])
 
 
 def cluster_colors(cluster_ids: NDArray[np.int64]) -> UInt8Array:
@@ -158,8 +168,9 @@ def cluster_colors(cluster_ids: NDArray[np.int64]) -> UInt8Array:
 
 #: Anchor colours of the time scale (dark blue, teal, green, yellow: a viridis-like ramp).
 _TIME_RAMP = np.array([(68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37)])
-#: Anchor colours of the error scale (blue, green, yellow, red at ERROR_SCALE_MAX).
-_ERROR_RAMP = np.array([(40, 110, 210), (40, 170, 90), (240, 200, 30), (215, 30, 30)])
+#: Anchor colours of the error scale (light grey to dark purple at ERROR_SCALE_MAX: no red, which
+#: means a false loop closure).
+_ERROR_RAMP = np.array([(200, 200, 200), (140, 150, 205), (85, 60, 165), (40, 0, 75)])
 
 
 def ramp(values: FloatArray, anchors: NDArray[np.int64]) -> UInt8Array:
@@ -388,12 +399,13 @@ class MapExtras:
 
     Attributes:
         truth_transform: (theta, tx, ty) taking the ground truth onto the map (None: no truth).
-        false_edge_times: creation times of the links the ground truth calls false.
+        false_edges: the map's loop-closure edges made from links the ground truth calls false,
+            as ``(time, end vertex)`` pairs (:attr:`~app.server.figures.MapFigures.false_edges`).
 
     """
 
     truth_transform: tuple[float, float, float] | None = None
-    false_edge_times: FloatArray = field(default_factory=lambda: np.zeros(0))
+    false_edges: FalseEdges = frozenset()
 
 
 #: The layers of a map a viewer can switch on and off (frame names under ``/map/<mode>``).
@@ -404,7 +416,6 @@ LAYERS: tuple[str, ...] = (
     "false_loops",
     "truth",
     "odometry",
-    "grid",
 )
 
 
@@ -435,9 +446,17 @@ class MapLayer:
                 )
         self.groups["odometry"].visible = False
         self.truth_frame = scene.add_frame(f"{self.name}/truth/aligned", show_axes=False)
-        self.grid = Grid(server, f"{self.name}/grid")
         self._offset = 0.0
-        self.point_size = VERTEX_SIZE_RANGE[1]
+        self.point_size = MIN_SPAN * VERTEX_FRACTION
+        self.label = scene.add_label(
+            f"{self.name}/name",
+            mode.value.replace("_", " "),
+            position=(0.0, 0.0, ROBOT_Z),
+            anchor="bottom-left",
+            font_screen_scale=1.25,
+            visible=False,
+        )
+        self._label_at: tuple[float, float] | None = None
 
         def vertices(name: str, part: np.ndarray, _: np.ndarray | None) -> viser.SceneNodeHandle:
             return scene.add_point_cloud(
@@ -467,22 +486,22 @@ class MapLayer:
 
             return make
 
+        # A node made with one colour keeps it: only its points are replaced. (viser's browser
+        # side does not switch a line material from one colour to per-vertex colours: red false
+        # loop closures updated that way were drawn white.)
         def move_points(handle: Any, part: np.ndarray, _: np.ndarray | None) -> None:
             with server.atomic():
                 handle.points = part
-                handle.colors = np.broadcast_to(
-                    np.array(self.color, np.uint8), (part.shape[0], 3)
-                ).copy()
                 if handle.point_size != self.point_size:
                     handle.point_size = self.point_size
 
         def move_segments(color: tuple[int, int, int] | None) -> NodeUpdater:
             def update(handle: Any, part: np.ndarray, cols: np.ndarray | None) -> None:
-                if cols is None:
-                    cols = np.broadcast_to(np.array(color, np.uint8), part.shape).copy()
                 with server.atomic():
                     handle.points = part
-                    handle.colors = cols
+                    if color is None:  # (made with per-vertex colours: replaced alike)
+                        assert cols is not None
+                        handle.colors = cols
 
             return update
 
@@ -506,7 +525,7 @@ class MapLayer:
         )
         self.truth = ChunkedNodes(
             f"{self.name}/truth/aligned",
-            plain(GROUND_TRUTH_COLOR, 1.5),
+            plain(GROUND_TRUTH_COLOR, 5.0),  # a light band under the map
             stats,
             updater=move_segments(GROUND_TRUTH_COLOR),
         )
@@ -516,8 +535,22 @@ class MapLayer:
             stats,
             updater=move_segments(ODOMETRY_COLOR),
         )
-        tri_v, tri_f = robot_triangle(0.07)
-        self.robot = scene.add_mesh_simple(
+        self.robot = self._make_robot()
+        self._map: CognitiveMap | None = None
+        self._key: tuple[int, int, int] | None = None
+        self._coloured_key: dict[str, tuple[int, tuple[int, int, int]]] = {}
+        self._robot_pose: tuple[float, float, float] | None = None
+        self._truth_sent: tuple[float, float, float] | None = None
+        self._false_key: tuple[FalseEdges, int] | None = None
+        self.false_count = 0
+        self.extent: Box | None = None  # xmin, xmax, ymin, ymax of the vertices
+        self.truth_extent: Box | None = None  # of the ground truth as aligned to the map
+        self._truth_key: tuple[int, tuple[float, float, float] | None] | None = None
+        self._segments = np.zeros((0, 2, 3), dtype=np.float32)
+
+    def _make_robot(self) -> viser.MeshHandle:
+        tri_v, tri_f = robot_triangle(ROBOT_VERTICES * self.point_size)
+        return self.server.scene.add_mesh_simple(
             f"{self.name}/robot",
             tri_v,
             tri_f,
@@ -527,17 +560,43 @@ class MapLayer:
             cast_shadow=False,
             receive_shadow=False,
         )
-        self._map: CognitiveMap | None = None
-        self._key: tuple[int, int, int] | None = None
-        self._coloured_key: dict[str, tuple[int, tuple[int, int, int]]] = {}
-        self._robot_pose: tuple[float, float, float] | None = None
-        self._truth_sent: tuple[float, float, float] | None = None
-        self._false_key: tuple[int, int] | None = None
-        self.false_count = 0
-        self.extent: tuple[float, float, float, float] | None = None  # xmin, xmax, ymin, ymax
-        self._segments = np.zeros((0, 2, 3), dtype=np.float32)
 
     # ------------------------------------------------------------------ layout
+    @property
+    def view_extent(self) -> Box | None:
+        """What the map shows: its vertices and the ground truth aligned to it."""
+        return union(self.extent, self.truth_extent)
+
+    def set_marker(self, size: float) -> None:
+        """Draw vertices ``size`` metres wide (and the robot to match); re-sent when it changes."""
+        if size == self.point_size:
+            return
+        self.point_size = size
+        if self.vertices.num_chunks:
+            items = self.vertices.items()
+            assert items is not None
+            self.vertices.sync(items, force=True)
+        pose = self._robot_pose
+        self.robot = self._make_robot()
+        if pose is not None:
+            self.robot.position = (pose[0], pose[1], ROBOT_Z)
+            self.robot.wxyz = yaw_to_wxyz(pose[2])
+
+    def place_label(self, unit: float) -> None:
+        """Put the map's name above the top-left corner of what it shows (``unit``: a margin)."""
+        box = self.view_extent
+        if box is None:
+            if self._label_at is not None:
+                self.label.visible = False
+                self._label_at = None
+            return
+        at = (round(box[0] / unit) * unit, round((box[3] + unit) / unit) * unit)
+        if at != self._label_at:
+            self.label.position = (at[0], at[1], ROBOT_Z)
+            if not self.label.visible:
+                self.label.visible = True
+            self._label_at = at
+
     @property
     def visible(self) -> bool:
         """Whether the map is shown (to viewers without a view of their own)."""
@@ -599,8 +658,6 @@ class MapLayer:
                 self._coloured_key[colouring] = ckey
         if extras is not None:
             self._send_extras(cmap, extras, changed)
-        if changed:
-            self.grid.cover(self.extent)
         pose = cmap.current_pose()
         robot = (float(pose[0]), float(pose[1]), float(pose[2]))
         if robot != self._robot_pose:
@@ -618,10 +675,7 @@ class MapLayer:
         points[:, 2] = VERTEX_Z
         is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
         segments = edge_segments(snap, np.where(is_loop, LOOP_Z, SEQUENTIAL_Z))
-        size = self._point_size(segments[~is_loop])
-        resized = size != self.point_size
-        self.point_size = size
-        self.vertices.sync(points, force=resized)
+        self.vertices.sync(points)
         self.extent = (
             (
                 float(points[:, 0].min()),
@@ -635,16 +689,6 @@ class MapLayer:
         self._segments = segments
         self._snapshot = snap
 
-    @staticmethod
-    def _point_size(sequential: NDArray[np.float32]) -> float:
-        """A third of the median sequential edge, in 2 mm steps (within the bounds)."""
-        if sequential.shape[0] == 0:
-            return VERTEX_SIZE_RANGE[1]
-        lengths = np.hypot(*(sequential[:, 1, :2] - sequential[:, 0, :2]).T)
-        size = float(np.median(lengths)) / 3.0
-        size = min(max(size, VERTEX_SIZE_RANGE[0]), VERTEX_SIZE_RANGE[1])
-        return round(size / 0.002) * 0.002
-
     def _send_edges(self, cmap: CognitiveMap, colouring: str, duration: float) -> None:
         snap = self._snapshot
         segments = self._segments
@@ -652,7 +696,7 @@ class MapLayer:
         m = segments.shape[0]
         if colouring == "cluster":
             colors = np.empty((m, 3), dtype=np.uint8)
-            colors[~is_loop] = SEQUENTIAL_COLOR
+            colors[~is_loop] = self.color
             colors[is_loop] = cluster_colors(snap.edge_cluster[is_loop])
         elif colouring == "time":
             colors = ramp(snap.edge_time / max(duration, 1e-9), _TIME_RAMP)
@@ -664,17 +708,16 @@ class MapLayer:
 
     def _send_extras(self, cmap: CognitiveMap, extras: MapExtras, changed: bool) -> None:
         transform = extras.truth_transform
+        self._truth_transform = transform
         if transform is not None and transform != self._truth_sent:
             theta, tx, ty = transform
             with self.server.atomic():
                 self.truth_frame.position = (tx, ty, 0.0)
                 self.truth_frame.wxyz = yaw_to_wxyz(theta)
             self._truth_sent = transform
-        false_key = (extras.false_edge_times.size, len(cmap.optimizations))
+        false_key = (extras.false_edges, len(cmap.optimizations))
         if changed or false_key != self._false_key:
-            snap = self._snapshot
-            is_loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
-            false = is_loop & np.isin(snap.edge_time, extras.false_edge_times)
+            false = false_edge_mask(self._snapshot, extras.false_edges)
             segments = self._segments[false].copy()
             segments[:, :, 2] = FALSE_LOOP_Z
             self.false_loops.sync(segments)
@@ -682,14 +725,24 @@ class MapLayer:
             self._false_key = false_key
 
     def update_paths(
-        self, truth: NDArray[np.float32] | None, odometry: NDArray[np.float32] | None
+        self,
+        truth: NDArray[np.float32] | None,
+        odometry: NDArray[np.float32] | None,
+        truth_poses: FloatArray | None = None,
     ) -> None:
         """Show the true path (raw frame) and the dead-reckoned one (map frame).
 
-        Both come as segments (:func:`path_segments`), made once per publish for every map.
+        Both come as segments (:func:`path_segments`), made once per publish for every map;
+        ``truth_poses`` (the truth's poses) give the truth's extent as aligned to the map.
         """
         if truth is not None:
             self.truth.sync(truth)
+        if truth_poses is not None:
+            transform = getattr(self, "_truth_transform", None)
+            key = (truth_poses.shape[0], transform)
+            if key != self._truth_key:
+                self._truth_key = key
+                self.truth_extent = _aligned_box(truth_poses, transform)
         if odometry is not None:
             self.odometry.sync(odometry)
 
@@ -705,52 +758,97 @@ class MapLayer:
         self._truth_sent = None
         self._false_key = None
         self.extent = None
-        self.grid._box = None
+        self.truth_extent = None
+        self._truth_key = None
+        self._truth_transform = None
+        if self._label_at is not None:
+            self.label.visible = False
+            self._label_at = None
+
+
+def _aligned_box(poses: FloatArray, transform: tuple[float, float, float] | None) -> Box | None:
+    """Bounding box of ``poses`` (x, y) moved by ``transform`` (theta, tx, ty)."""
+    if poses.shape[0] == 0 or transform is None:
+        return None
+    theta, tx, ty = transform
+    c, s = math.cos(theta), math.sin(theta)
+    x = c * poses[:, 0] - s * poses[:, 1] + tx
+    y = s * poses[:, 0] + c * poses[:, 1] + ty
+    return (float(x.min()), float(x.max()), float(y.min()), float(y.max()))
 
 
 class Grid:
-    """A metric grid (0.1 m cells, 1 m sections) under a map, with a 1 m scale bar."""
+    """One metric grid under everything a view shows, with a scale bar at its bottom right.
 
-    def __init__(self, server: viser.ViserServer, name: str) -> None:
-        """Create the (empty) grid under the frame ``name``."""
-        self.server = server
+    The spacing suits the extent (:func:`grid_spacing`: 0.1 m cells and 1 m sections for a 4 m
+    maze, 2 m and 10 m for a 40 m hall); the scale bar is one section long, under the content's
+    bottom-right corner (clear of the axes gizmo at the screen's bottom left), its length
+    written above it. ``scene`` is the server's (the default view) or a client's (a viewer's).
+    """
+
+    def __init__(self, scene: Any, name: str) -> None:
+        """Create the (empty) grid under the frame ``name`` of ``scene``."""
+        self.scene = scene
         self.name = name
-        self._box: tuple[float, float, float, float] | None = None
+        self.frame = scene.add_frame(name, show_axes=False)
+        self._sent: tuple[Box, float, float, tuple[float, float]] | None = None
+        self.section = 1.0
+        self.cell = 0.1
+        self.bar: tuple[float, float, float] | None = None  # x0, x1, y of the scale bar
 
-    def cover(self, extent: tuple[float, float, float, float] | None) -> None:
-        """Cover ``extent`` (with a margin), re-sent only when it grows out of the grid."""
-        if extent is None:
-            return
-        x0, x1, y0, y1 = extent
-        box = self._box
-        if box is not None and box[0] <= x0 and box[1] >= x1 and box[2] <= y0 and box[3] >= y1:
-            return
-        x0, y0 = math.floor(x0) - 1.0, math.floor(y0) - 1.0
-        x1, y1 = math.ceil(x1) + 1.0, math.ceil(y1) + 1.0
-        self._box = (x0, x1, y0, y1)
-        scene = self.server.scene
-        with self.server.atomic():
-            scene.add_grid(
+    def cover(self, content: Box | None, span: float | None = None) -> Box | None:
+        """Lie under ``content`` (spacing for ``span``, default its own); returns what to frame.
+
+        What to frame: ``content`` with the scale bar below it and a margin for the maps'
+        names above it. The grid is sent again only when its box, spacing or bar change.
+        """
+        if content is None:
+            return None
+        x0, x1, y0, y1 = content
+        section, cell = grid_spacing(max(span or 0.0, span_of(content), 1e-3))
+        self.section, self.cell = section, cell
+        # beyond the content by most of its size: the canvas is filled whatever its shape
+        pad = max(section, 0.8 * span_of(content))
+        gx0 = math.floor((x0 - pad) / section) * section
+        gx1 = math.ceil((x1 + pad) / section) * section
+        gy0 = math.floor((y0 - pad) / section) * section
+        gy1 = math.ceil((y1 + pad) / section) * section
+        bar_y = y0 - 0.6 * section
+        bar = (x1 - section, bar_y)
+        box = (gx0, gx1, gy0, gy1)
+        key = (box, section, cell, (round(bar[0] / cell) * cell, round(bar[1] / cell) * cell))
+        bx, by = key[3]
+        self.bar = (bx, bx + section, by)
+        if key != self._sent:
+            self._sent = key
+            self.scene.add_grid(
                 f"{self.name}/plane",
-                width=x1 - x0,
-                height=y1 - y0,
+                width=gx1 - gx0,
+                height=gy1 - gy0,
                 plane="xy",
-                cell_size=0.1,
-                section_size=1.0,
-                cell_color=(222, 222, 222),
-                section_color=(170, 170, 170),
+                cell_size=cell,
+                section_size=section,
+                cell_color=(228, 228, 228),
+                section_color=(180, 180, 180),
+                cell_thickness=1.0,
+                section_thickness=1.4,
                 shadow_opacity=0.0,
-                position=((x0 + x1) / 2, (y0 + y1) / 2, GRID_Z),
+                fade_strength=0.0,  # (the plan view's camera is far: no fading with distance)
+                fade_distance=1e9,
+                position=((gx0 + gx1) / 2, (gy0 + gy1) / 2, GRID_Z),
             )
-            bar = np.array([[[x0 + 0.2, y0 + 0.3, 0.0], [x0 + 1.2, y0 + 0.3, 0.0]]], np.float32)
-            scene.add_line_segments(
-                f"{self.name}/scale",
-                bar,
-                colors=(40, 40, 40),
-                thickness=4.0,
-                thickness_units="screen",
+            line = np.array([[[bx, by, 0.0], [bx + section, by, 0.0]]], np.float32)
+            self.scene.add_line_segments(
+                f"{self.name}/scale", line, colors=INK, thickness=4.0, thickness_units="screen"
             )
-            scene.add_label(f"{self.name}/scale/label", "1 m", position=(x0 + 0.7, y0 + 0.42, 0.0))
+            self.scene.add_label(
+                f"{self.name}/scale/label",
+                f"{section:g} m",
+                position=(bx + section / 2, by + 0.05 * section, ROBOT_Z),
+                anchor="bottom-center",
+                font_screen_scale=1.15,
+            )
+        return (x0, x1, bar_y - 0.25 * section, y1 + 0.8 * section)
 
 
 class SceneStreamer:
@@ -776,6 +874,10 @@ class SceneStreamer:
         self.colourings: set[str] = {"cluster"}
         self.show_odometry = False
         self._truth = np.zeros((0, 3))
+        #: sizes are chosen for at least this extent (m; the app sets it by the input's kind)
+        self.min_span = MIN_SPAN
+        self.marker = MIN_SPAN * VERTEX_FRACTION
+        self.grid = Grid(server.scene, "/grid")  # the default view's (replays, a new tab)
         self.show((MapMode.COMPACT,))
 
     def show(self, modes: Sequence[MapMode], show_ground_truth: bool = True) -> None:
@@ -804,12 +906,37 @@ class SceneStreamer:
         step = self.side_by_side_step(self.shown)
         for k, mode in enumerate(self.shown[1:], start=1):
             self.layers[mode].offset = step * k
+        self.grid.cover(self.extent(), self.span())
 
     def side_by_side_step(self, modes: Sequence[MapMode]) -> float:
-        """Shift (m) between maps shown side by side: the widest map plus a margin."""
-        extents = [e for e in (self.layers[m].extent for m in modes) if e is not None]
-        width = max((e[1] - e[0] for e in extents), default=1.0)
-        return math.ceil((width + 0.5) * 2.0) / 2.0  # in 0.5 m steps: few re-placements
+        """Shift (m) between maps shown side by side: the widest map (with its truth) and a gap.
+
+        In steps of a grid section (the maps then sit alike on the one grid under them, and are
+        placed again only when they outgrow a step).
+        """
+        boxes = [b for b in (self.layers[m].view_extent for m in modes) if b is not None]
+        width = max((b[1] - b[0] for b in boxes), default=1.0)
+        section, _ = grid_spacing(self.span())
+        return math.ceil((width + 0.5 * section) / section) * section
+
+    def span(self) -> float:
+        """The extent sizes are chosen for: every map's and the truth's, at least ``min_span``."""
+        box = None
+        for layer in self.layers.values():
+            if layer.extent is not None:
+                box = union(box, layer.view_extent)
+        if self._truth.shape[0]:
+            t = self._truth
+            box = union(box, (t[:, 0].min(), t[:, 0].max(), t[:, 1].min(), t[:, 1].max()))
+        return max(span_of(box), self.min_span)
+
+    def _resize(self) -> None:
+        """Size the vertices and robots for the extent (:data:`VERTEX_FRACTION`, rounded)."""
+        marker = nice(self.span() * VERTEX_FRACTION)
+        if marker != self.marker:
+            self.marker = marker
+        for layer in self.layers.values():
+            layer.set_marker(self.marker)
 
     def publish(
         self,
@@ -836,7 +963,11 @@ class SceneStreamer:
                     None if extras is None else extras.get(mode),
                     duration,
                 )
-                layer.update_paths(truth_segments, odometry_segments)
+                layer.update_paths(truth_segments, odometry_segments, truth)
+            self._resize()
+            section, _ = grid_spacing(self.span())
+            for mode in self.needed & set(maps):
+                self.layers[mode].place_label(0.25 * section)
             self._place()
         self.stats.updates += 1
         self.stats.seconds += time.perf_counter() - started
@@ -867,15 +998,18 @@ class SceneStreamer:
     ) -> tuple[float, float, float, float] | None:
         """Bounding box (xmin, xmax, ymin, ymax) of ``modes`` (default: the shown ones).
 
+        Each map's vertices and its aligned ground truth (what it shows).
+
         ``offsets``: their shifts along x (default: the default view's).
         """
         modes = self.shown if modes is None else tuple(modes)
         boxes = []
         for k, mode in enumerate(modes):
             layer = self.layers[mode]
-            if layer.extent is not None:
+            box = layer.view_extent
+            if box is not None:
                 shift = layer.offset if offsets is None else offsets[k]
-                x0, x1, y0, y1 = layer.extent
+                x0, x1, y0, y1 = box
                 boxes.append((x0 + shift, x1 + shift, y0, y1))
         if not boxes:
             return None

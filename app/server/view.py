@@ -29,7 +29,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
-from app.server.figures import false_link_label, layout_radius_label
+from app.server.figures import FalseEdges, false_link_label, layout_radius_label
 from app.server.params import ALL_SLIDERS, format_value
 from app.server.scene import (
     COLOURINGS,
@@ -42,11 +42,15 @@ from app.server.scene import (
     ODOMETRY_COLOR,
     PINNED_COLOR,
     SELECTION_COLOR,
-    SEQUENTIAL_COLOR,
     TIME_RAMP_CSS,
+    Box,
+    Grid,
     cluster_color,
     edge_error,
     edge_segments,
+    grid_spacing,
+    span_of,
+    union,
 )
 from app.server.validation import GuiGate, boolean, choice, click
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
@@ -62,13 +66,14 @@ COLOURING_LABELS: dict[str, str] = {
     "time": "time",
     "error": "error (residual)",
 }
+#: Layer checkboxes (labels short enough for one line of the panel's label column).
 LAYER_LABELS: dict[str, str] = {
     "vertices": "vertices",
-    "sequential": "sequential edges",
-    "loop": "loop-closure edges",
-    "false_loops": "false loop closures",
+    "sequential": "sequential",
+    "loop": "loop closures",
+    "false_loops": "false loops",
     "truth": "ground truth",
-    "odometry": "dead-reckoned odometry",
+    "odometry": "odometry",
     "grid": "metric grid",
 }
 PIN_DISPLAYS: tuple[str, ...] = ("beside", "under")
@@ -78,8 +83,15 @@ PIN_DISPLAYS: tuple[str, ...] = ("beside", "under")
 warnings.filterwarnings(
     "ignore", message=r"Queued a \w+ on a closed connection", category=UserWarning
 )
-#: The control panel's width on the page (px), left out when the camera frames the maps.
-PANEL_PX = 430
+#: Margin kept free around what the camera frames, as a share of the canvas's height (the axes
+#: gizmo at the bottom left). The control panel is docked beside the canvas, not over it.
+MARGIN = 0.07
+#: The plan view (the default): the camera looks straight down, north (+y) up, from far away
+#: through a narrow field of view -- viser has no orthographic camera, and at 3 degrees a
+#: perspective camera draws the flat map at one scale to within 0.1 %.
+PLAN_FOV = math.radians(3.0)
+#: The 3-D view's field of view.
+VIEW_FOV = math.radians(50.0)
 #: A click selects what lies within this many pixels.
 PICK_PX = 10.0
 
@@ -146,6 +158,7 @@ class Pick:
     index: int  # into the snapshot's vertices or edges
     html: str
     segment: NDArray[np.float64]  # (2, 2) the edge's ends, or the vertex twice
+    summary: str = ""  # one line, written beside it in the scene
 
 
 class ClientView:
@@ -174,6 +187,9 @@ class ClientView:
         # meanwhile on another thread must still count
         self._setting = threading.local()
         self.closed = False
+        self.plan = True  # the plan view (else the 3-D view)
+        self.grid = Grid(client.scene, "/view/grid")  # this tab's grid: under all it shows
+        self._frame_box: Box | None = None
         self._build_gui()
         self._guard()
         self.client.scene.on_click()(self._on_click)
@@ -204,7 +220,7 @@ class ClientView:
             self.follow_checkbox = gui.add_checkbox(
                 "follow the map", s.follow, hint="re-frame the camera as the map grows"
             )
-            self.top_button = gui.add_button("top view", icon=viser.Icon.MAP_2)
+            self.top_button = gui.add_button("plan view", icon=viser.Icon.MAP_2)
             self.view3d_button = gui.add_button("3-D view", icon=viser.Icon.VIEW_360)
             self.legend_html = gui.add_html("")
         with app.inspect_folder:
@@ -294,16 +310,39 @@ class ClientView:
     def offsets(self) -> dict[str, float]:
         """Shift along x (m) of each shown map, and of the pinned map (``"pinned"``)."""
         shown = self.state.shown
-        step = self.app.streamer.side_by_side_step(shown)
+        streamer = self.app.streamer
+        step = streamer.side_by_side_step(shown)
         out = {mode.value: step * k for k, mode in enumerate(shown)}
         pinned = self.pinned  # read once: another thread may unpin meanwhile
         if pinned is not None:
             if self.state.pin_display == "under":
                 out["pinned"] = 0.0
             else:
-                pinned_width = _extent_width(pinned.snapshot)
-                out["pinned"] = step * (len(shown) - 1) + max(step, pinned_width + 0.5)
+                section, _ = grid_spacing(streamer.span())
+                width = _extent_width(pinned.snapshot) + 0.5 * section
+                out["pinned"] = step * (len(shown) - 1) + max(
+                    step, math.ceil(width / section) * section
+                )
         return out
+
+    def _place(self) -> None:
+        """Shift the shown maps (and the pinned one) to where :meth:`offsets` has them now."""
+        offsets = self.offsets()
+        with self.client.atomic():
+            for mode in self.state.shown:
+                self._shadow(f"/map/{mode.value}", True, offsets[mode.value])
+            if self._pinned_frame is not None:
+                position = (offsets.get("pinned", 0.0), 0.0, -0.002)
+                if tuple(self._pinned_frame.position) != position:
+                    self._pinned_frame.position = position
+
+    def update_grid(self) -> None:
+        """Lay this tab's grid under everything it shows (maps side by side, the pinned one)."""
+        content = self.content_extent()
+        self._frame_box = self.grid.cover(content, self.app.streamer.span())
+        visible = self.state.layers["grid"]
+        if self.grid.frame.visible != visible:
+            self.grid.frame.visible = visible
 
     def apply(self, reframe: bool = False) -> None:
         """Bring the tab's shadows, legend and the streamer's needs up to date."""
@@ -321,18 +360,20 @@ class ClientView:
                 for kind in ("sequential", "loop"):
                     for colouring in COLOURINGS:
                         wanted[f"{root}/{kind}/{colouring}"] = (colouring == s.colouring, 0.0)
+            wanted["/grid"] = (False, 0.0)  # the default view's grid: this tab has its own
             with self.client.atomic():
                 for name, (visible, x) in wanted.items():
                     self._shadow(name, visible, x)
                 if self._pinned_frame is not None:
                     self._pinned_frame.position = (offsets.get("pinned", 0.0), 0.0, -0.002)
+                self.update_grid()
             self.legend_html.content = self._legend()
             self.app.views_changed()
             self._log_key = None
             self._compare_key = None
         self.refresh()
         if reframe or (s.follow and self._framed is None):
-            self.frame_camera(top=True)
+            self.frame_camera()
 
     def _shadow(self, name: str, visible: bool, x: float) -> None:
         if self._shadow_state.get(name) == (visible, x):
@@ -356,7 +397,7 @@ class ClientView:
         ]
         if s.colouring == "cluster":
             parts.append(
-                f"{swatch(SEQUENTIAL_COLOR)}sequential edges · loop-closure edges coloured by "
+                "sequential edges in their map's colour · loop-closure edges coloured by "
                 "cluster (see <i>Clusters &amp; optimisations</i>)"
             )
         elif s.colouring == "time":
@@ -380,7 +421,11 @@ class ClientView:
         if s.layers["odometry"]:
             parts.append(f"{swatch(ODOMETRY_COLOR)}dead-reckoned odometry (the map's frame)")
         if s.layers["grid"]:
-            parts.append("grid: 0.1 m cells, 1 m sections (scale bar: 1 m)")
+            g = self.grid
+            parts.append(
+                f"grid: {g.cell:g} m cells, {g.section:g} m sections (scale bar: {g.section:g} m, "
+                "bottom right); each map's name above it"
+            )
         parts.append(f"{swatch((15, 15, 15))}robot")
         pinned = self.pinned  # read once: another thread may unpin meanwhile
         if pinned is not None:
@@ -388,8 +433,8 @@ class ClientView:
         return '<div class="cogmap-note" id="cogmap-legend">' + "<br>".join(parts) + "</div>"
 
     # ================================================================== camera
-    def content_extent(self) -> tuple[float, float, float, float] | None:
-        """What the view shows (maps with their shifts, and the pinned map beside)."""
+    def content_extent(self) -> Box | None:
+        """What the view shows (maps with their truth and shifts, and the pinned map beside)."""
         offsets = self.offsets()
         shown = self.state.shown
         box = self.app.streamer.extent(shown, [offsets[m.value] for m in shown])
@@ -403,40 +448,78 @@ class ClientView:
                 float(p[:, 1].min()),
                 float(p[:, 1].max()),
             )
-            box = pbox if box is None else _union(box, pbox)
+            box = union(box, pbox)
         return box
 
-    def frame_camera(self, top: bool = True) -> None:
-        """Point the camera at what the view shows, left of the control panel."""
+    def frame_box(self) -> Box:
+        """What the camera frames: the content with the scale bar and the names, or more.
+
+        Never less than the streamer's ``min_span`` across: the first vertices of a map are
+        not framed as if they were the whole map.
+        """
+        box = self._frame_box or self.grid.cover(self.content_extent(), self.app.streamer.span())
+        if box is None:
+            box = (-0.5, 3.5, -0.5, 2.5)
+        x0, x1, y0, y1 = box
+        least = self.app.streamer.min_span
+        if x1 - x0 < least:
+            x0, x1 = (x0 + x1 - least) / 2, (x0 + x1 + least) / 2
+        if y1 - y0 < least * 0.6:
+            y0, y1 = (y0 + y1 - least * 0.6) / 2, (y0 + y1 + least * 0.6) / 2
+        return (x0, x1, y0, y1)
+
+    def frame_camera(self, top: bool | None = None) -> None:
+        """Point the camera at what the view shows, left of the control panel.
+
+        ``top``: the plan view (straight down, north up, a narrow field of view: as good as
+        orthographic); False: the 3-D view; None: the view in use.
+        """
         with self._lock:  # (see follow)
-            extent = self.content_extent() or (-0.5, 3.5, -0.5, 2.5)
+            if top is not None:
+                self.plan = top
+            top = self.plan
+            self.update_grid()
+            box = self.frame_box()
             camera = self.client.camera
             width = camera.image_width or 1280
             height = camera.image_height or 800
-            fov = camera.fov if camera.fov > 0 else math.radians(50.0)
-            usable = max(0.35, 1.0 - PANEL_PX / width)
-            x0, x1, y0, y1 = extent
-            w, h = max(x1 - x0, 0.5) * 1.12, max(y1 - y0, 0.5) * 1.12
+            fov = PLAN_FOV if top else VIEW_FOV
+            # (the canvas's size in its own pixels, whatever their size on the screen: only the
+            # ratio of the two matters)
+            margin = MARGIN * height
+            usable_w = max(0.5 * width, width - 2 * margin)
+            usable_h = max(0.5 * height, height - 2 * margin)
+            x0, x1, y0, y1 = box
+            w, h = max(x1 - x0, 0.5), max(y1 - y0, 0.5)
             tan = math.tan(fov / 2.0)
-            distance = max(h / (2.0 * tan), w / (2.0 * tan * (width / height) * usable))
-            visible_w = 2.0 * distance * tan * (width / height)
-            shift = (PANEL_PX / 2.0 / width) * visible_w * (1.0 if usable > 0.35 else 0)
-            cx = (x0 + x1) / 2 + shift
+            # the vertical field spans `height` pixels at 2 d tan(fov / 2) metres
+            distance = max(h * height / usable_h, w * height / usable_w) / (2.0 * tan)
+            cx = (x0 + x1) / 2
             cy = (y0 + y1) / 2
             if top:
-                position = (cx, cy - 0.02 * distance, distance)
+                position = (cx, cy - 1e-4 * distance, distance)
+                near, far = 0.2 * distance, 5.0 * distance
             else:
                 position = (cx + 0.35 * distance, cy - 0.75 * distance, 0.65 * distance)
+                near, far = max(1e-3, 1e-3 * distance), 50.0 * distance
             self._camera_expected = np.array(position)
             self._camera_acknowledged = False
-            self._framed = extent
+            self._framed = self.content_extent()
             with self.client.atomic():
+                if camera.max_orbit_distance < 4.0 * distance:
+                    camera.max_orbit_distance = 4.0 * distance
+                camera.fov = fov
+                camera.near = near
+                camera.far = far
                 camera.up_direction = (0.0, 0.0, 1.0)
                 camera.position = position
                 camera.look_at = (cx, cy, 0.0)
 
     def follow(self) -> None:
         """Re-frame when the map grew out of the framed box or shrank to a fraction of it.
+
+        (By 3 % of the framed extent, at least of the streamer's ``min_span``: a map that grows
+        a little at a time is framed again now and then, not at every vertex.)
 
         Runs under the view's own lock: the replay's worker and the figures thread both call it,
         and two framings at once would each take the other's camera pose for the viewer's move.
@@ -449,17 +532,18 @@ class ClientView:
             if extent is None:
                 return
             if framed is not None:
+                slack = 0.03 * max(span_of(framed), self.app.streamer.min_span)
                 grew = (
-                    extent[0] < framed[0] - 0.05
-                    or extent[1] > framed[1] + 0.05
-                    or extent[2] < framed[2] - 0.05
-                    or extent[3] > framed[3] + 0.05
+                    extent[0] < framed[0] - slack
+                    or extent[1] > framed[1] + slack
+                    or extent[2] < framed[2] - slack
+                    or extent[3] > framed[3] + slack
                 )
                 area = (extent[1] - extent[0]) * (extent[3] - extent[2])
                 framed_area = (framed[1] - framed[0]) * (framed[3] - framed[2])
                 if not grew and area >= 0.4 * framed_area:
                     return
-            self.frame_camera(top=True)  # (the lock is re-entered)
+            self.frame_camera()  # (the lock is re-entered; the view in use)
 
     def _on_camera(self, camera: viser.CameraHandle) -> None:
         """A camera report: the viewer moved the camera (not the view): stop following the map.
@@ -505,6 +589,12 @@ class ClientView:
                 if ckey != self._compare_key:
                     self._compare_key = ckey
                     self.compare_html.content = self._compare_table(cmap)
+            with self._lock:
+                self._place()  # the maps grow: side by side they stay clear of each other
+                self.update_grid()
+                legend = self._legend()
+                if self.legend_html.content != legend:
+                    self.legend_html.content = legend
         self.follow()
 
     # ================================================================== inspect
@@ -554,10 +644,20 @@ class ClientView:
                         name,
                         seg[0, :1],
                         colors=SELECTION_COLOR,
-                        point_size=0.035,
+                        point_size=1.8 * self.app.streamer.marker,
                         point_shape="circle",
                     )
                 )
+            # what was picked, written beside it (the Inspect panel has the details)
+            self._selection.append(
+                scene.add_label(
+                    f"{name}_label",
+                    pick.summary,
+                    position=(float(seg[0, 1, 0]), float(seg[0, 1, 1]), 0.012),
+                    anchor="bottom-left",
+                    font_screen_scale=1.2,
+                )
+            )
 
     # ================================================================== pin and compare
     def pin(self) -> None:
@@ -609,14 +709,24 @@ class ClientView:
                     "/pinned/vertices",
                     points,
                     colors=PINNED_COLOR,
-                    point_size=0.025,
+                    point_size=self.app.streamer.marker,
                     point_shape="circle",
                     point_shading="flat",
                 )
             )
+            top_left = (float(points[:, 0].min()), float(points[:, 1].max()))
+            self._pinned_nodes.append(
+                scene.add_label(
+                    "/pinned/name",
+                    f"pinned {self.pinned.mode.value.replace('_', ' ')}",
+                    position=(top_left[0], top_left[1] + 0.06 * self.grid.section * 4, 0.009),
+                    anchor="bottom-left",
+                    font_screen_scale=1.25,
+                )
+            )
         if snap.edge_from.shape[0]:
             loop = snap.edge_kind == EdgeKind.LOOP_CLOSURE
-            colors = np.where(loop[:, None], (110, 60, 170), (185, 170, 215)).astype(np.uint8)
+            colors = np.where(loop[:, None], (40, 90, 130), PINNED_COLOR).astype(np.uint8)
             self._pinned_nodes.append(
                 scene.add_line_segments(
                     "/pinned/edges",
@@ -673,12 +783,6 @@ class ClientView:
         self.closed = True
 
 
-def _union(
-    a: tuple[float, float, float, float], b: tuple[float, float, float, float]
-) -> tuple[float, float, float, float]:
-    return (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
-
-
 def _extent_width(snap: MapSnapshot) -> float:
     if snap.poses.shape[0] == 0:
         return 1.0
@@ -709,7 +813,7 @@ def describe_vertex(cmap: CognitiveMap, snap: MapSnapshot, index: int) -> str:
 
 
 def describe_edge(
-    cmap: CognitiveMap, snap: MapSnapshot, index: int, false_times: NDArray[np.float64]
+    cmap: CognitiveMap, snap: MapSnapshot, index: int, false_edges: FalseEdges = frozenset()
 ) -> str:
     """What the page says about edge ``index`` of ``snap`` (with its residual)."""
     kind = "loop closure" if snap.edge_kind[index] == EdgeKind.LOOP_CLOSURE else "sequential"
@@ -725,7 +829,7 @@ def describe_edge(
     if kind == "loop closure":
         cid = int(snap.edge_cluster[index])
         rows.insert(3, ("cluster", f"{swatch(cluster_color(cid))}{cid}"))
-        false = bool(np.isin(snap.edge_time[index], false_times))
+        false = (float(snap.edge_time[index]), int(snap.edge_to[index])) in false_edges
         rows.append(("ground truth", "<b>false loop closure</b>" if false else "true loop closure"))
     return _info_table("edge", rows)
 
@@ -743,7 +847,7 @@ def nearest_pick(
     mode: MapMode,
     point: NDArray[np.float64],
     tolerance: float,
-    false_times: NDArray[np.float64],
+    false_edges: FalseEdges,
     vertex_radius: float = 0.0,
 ) -> tuple[float, Pick] | None:
     """The vertex or edge of ``cmap`` nearest to ``point`` within ``tolerance``.
@@ -770,10 +874,18 @@ def nearest_pick(
         gap[np.minimum(t, 1 - t) * length < zone] = np.inf  # at an end: that vertex's
         e = int(np.argmin(gap))
         gap_e = float(gap[e])
+    name = mode.value.replace("_", " ")
     if gap_e <= tolerance and gap_e < d[k]:
         seg = np.array([a[e], b[e]])
-        return gap_e, Pick(mode, "edge", e, describe_edge(cmap, snap, e, false_times), seg)
+        loop = snap.edge_kind[e] == EdgeKind.LOOP_CLOSURE
+        false = (float(snap.edge_time[e]), int(snap.edge_to[e])) in false_edges
+        summary = f"{name}: edge {int(snap.edge_from[e])} → {int(snap.edge_to[e])}" + (
+            " (loop closure" + (", false)" if false else ")") if loop else ""
+        )
+        html_ = describe_edge(cmap, snap, e, false_edges)
+        return gap_e, Pick(mode, "edge", e, html_, seg, summary)
     if d[k] <= tolerance:
         seg = np.array([snap.poses[k, :2], snap.poses[k, :2]])
-        return float(d[k]), Pick(mode, "vertex", k, describe_vertex(cmap, snap, k), seg)
+        summary = f"{name}: vertex {int(snap.vertex_ids[k])} ({snap.vertex_time[k]:.1f} s)"
+        return float(d[k]), Pick(mode, "vertex", k, describe_vertex(cmap, snap, k), seg, summary)
     return None
