@@ -46,6 +46,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "app.cmd_serve",
     "app.cmd_run",
     "app.cmd_optimize",
+    "app.cmd_route",
     "app.cmd_make_maze",
     "app.cmd_make_log",
     "app.cmd_dataset",

@@ -40,8 +40,8 @@ def _usage_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
         (
             ["frobnicate"],
             "cogmap: error: argument COMMAND: invalid choice: 'frobnicate' (choose from "
-            "'serve', 'run', 'optimize', 'make-maze', 'make-log', 'dataset', 'sweep'); see "
-            "cogmap --help",
+            "'serve', 'run', 'optimize', 'route', 'make-maze', 'make-log', 'dataset', 'sweep'); "
+            "see cogmap --help",
         ),
         (
             ["--no-such-option"],
