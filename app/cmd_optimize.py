@@ -12,6 +12,7 @@ from cogmap_core.errors import InputFileError, OutputError
 from cogmap_core.fileio import check_writable, output_error
 from cogmap_core.g2o import read_g2o, write_g2o
 from cogmap_core.optimizer import OptimizationResult, OptimizerOptions, optimize_pose_graph
+from cogmap_core.robust import DEFAULT_LOOP_KERNEL, KERNELS, LoopClosureModel
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -29,19 +30,23 @@ class OptimizeReport:
     final_cost: float
     iterations: int
     wall_s: float
+    loop_closures: int | None = None
+    loop_closures_rejected: int | None = None
 
     def to_json(self) -> str:
-        """One JSON line."""
-        return json.dumps(
-            {
-                "vertices": self.vertices,
-                "edges": self.edges,
-                "initial_cost": _finite_or_none(self.initial_cost),
-                "final_cost": _finite_or_none(self.final_cost),
-                "iterations": self.iterations,
-                "wall_s": round(self.wall_s, 6),
-            }
-        )
+        """One JSON line (with ``--robust``, also the loop closures and how many it rejected)."""
+        line: dict[str, object] = {
+            "vertices": self.vertices,
+            "edges": self.edges,
+            "initial_cost": _finite_or_none(self.initial_cost),
+            "final_cost": _finite_or_none(self.final_cost),
+            "iterations": self.iterations,
+            "wall_s": round(self.wall_s, 6),
+        }
+        if self.loop_closures is not None:
+            line["loop_closures"] = self.loop_closures
+            line["loop_closures_rejected"] = self.loop_closures_rejected
+        return json.dumps(line)
 
 
 def check_destination(destination: Path) -> None:
@@ -74,6 +79,7 @@ def optimize_file(
         write_g2o(graph.with_poses(result.poses), destination)
     except OSError as exc:
         raise output_error(destination, exc) from None
+    robust = options.loop_model is not None
     report = OptimizeReport(
         vertices=graph.num_vertices,
         edges=graph.num_edges,
@@ -81,15 +87,23 @@ def optimize_file(
         final_cost=result.final_cost,
         iterations=result.iterations,
         wall_s=result.wall_s,
+        loop_closures=int(graph.loop_closures().sum()) if robust else None,
+        loop_closures_rejected=result.num_rejected if robust else None,
     )
     return report, result
 
 
 def _run(args: argparse.Namespace) -> int:
+    loop_model = None
+    if args.robust is not None:
+        loop_model = LoopClosureModel(
+            args.robust, args.robust_scale, graduated=args.robust == "geman_mcclure" and args.gnc
+        )
     options = OptimizerOptions(
         huber_scale=args.huber,
         initialization=args.init,
         max_iterations=args.max_iterations,
+        loop_model=loop_model,
     )
     report, _ = optimize_file(Path(args.input), Path(args.output), options)
     print(report.to_json())
@@ -114,6 +128,30 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         metavar="SCALE",
         help="robustify every edge with a Huber loss of this scale (default: plain least squares)",
+    )
+    parser.add_argument(
+        "--robust",
+        nargs="?",
+        const=DEFAULT_LOOP_KERNEL,
+        choices=KERNELS,
+        default=None,
+        metavar="KERNEL",
+        help="judge the loop closures (edges between vertices whose ids are not consecutive) "
+        f"with a robust kernel, solved by reweighting (default kernel {DEFAULT_LOOP_KERNEL}; "
+        f"one of {', '.join(KERNELS)}); the other edges keep --huber or least squares, and the "
+        "printed line adds the loop closures and how many were rejected",
+    )
+    parser.add_argument(
+        "--robust-scale",
+        type=float,
+        default=1.0,
+        metavar="CHI",
+        help="the robust kernel's scale in standard deviations of a loop closure (default 1)",
+    )
+    parser.add_argument(
+        "--gnc",
+        action="store_true",
+        help="with --robust geman_mcclure: graduated non-convexity from least squares",
     )
     parser.add_argument(
         "--init",

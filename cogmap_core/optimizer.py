@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import signal
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -46,6 +47,15 @@ from cogmap_core.errors import OptimizationError, ParameterError
 from cogmap_core.geometry import wrap_angle
 from cogmap_core.initialization import lago_initialization
 from cogmap_core.posegraph import PoseGraph
+from cogmap_core.robust import (
+    IRLS_ITERATIONS,
+    Kernel,
+    LoopClosureModel,
+    Reweighting,
+    Weights,
+    apply_kernel,
+    drop_small,
+)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -85,9 +95,12 @@ class OptimizerOptions:
             linear LAGO estimate computed from the edges; ``"auto"`` uses LAGO only when the
             given poses are far from consistent with the edges (initial cost above
             ``AUTO_LAGO_COST_PER_EDGE`` per edge, i.e. mean chi^2 well above its noise level).
-        max_iterations: Ceres' iteration limit.
+        max_iterations: Ceres' iteration limit (per stage of a graduated solve).
         function_tolerance: Ceres stops when the relative cost decrease falls below this.
         chunk_size: vertices per Ceres parameter block.
+        loop_model: a robust model for the loop-closure edges (:mod:`cogmap_core.robust`;
+            :meth:`PoseGraph.loop_closures` says which edges); they then take its kernel
+            instead of the Huber loss, which stays on the other edges. None: every edge alike.
 
     """
 
@@ -96,6 +109,7 @@ class OptimizerOptions:
     max_iterations: int = 100
     function_tolerance: float = 1e-6
     chunk_size: int = 32
+    loop_model: LoopClosureModel | None = None
 
     def __post_init__(self) -> None:
         """Validate ranges."""
@@ -125,6 +139,10 @@ class OptimizationResult:
             evaluation of the start point).
         wall_s: wall time of the whole optimisation (initialisation, problem set-up, solve).
         termination: Ceres' termination type (``CONVERGENCE``, ``NO_CONVERGENCE``, ...).
+        rejected: ``(E,)`` loop closures the loop model rejected (their final chi^2 is past
+            its kernel's scale), in the graph's edge order; all False without a loop model.
+        reweightings: rounds of iteratively reweighted least squares the loop model ran
+            (:mod:`cogmap_core.robust`; 0 without one).
 
     """
 
@@ -134,6 +152,13 @@ class OptimizationResult:
     iterations: int
     wall_s: float
     termination: str
+    rejected: NDArray[np.bool_] | None = None
+    reweightings: int = 0
+
+    @property
+    def num_rejected(self) -> int:
+        """How many loop closures the loop model rejected."""
+        return 0 if self.rejected is None else int(np.count_nonzero(self.rejected))
 
 
 # --------------------------------------------------------------------------------------------
@@ -177,17 +202,28 @@ class EdgeModel:
         return out
 
 
+EdgeLosses = Sequence[tuple[NDArray[np.bool_] | None, Kernel | Weights]]
+"""Robust kernels and the edges (a mask; None: all) each applies to; the masks are disjoint."""
+
+
+def edge_losses(huber_scale: float | None) -> EdgeLosses:
+    """The paper's loss: Huber on every edge (none for plain least squares)."""
+    return () if huber_scale is None else ((None, Kernel("huber", huber_scale)),)
+
+
 def edge_terms(
     pose_i: FloatArray,
     pose_j: FloatArray,
     model: EdgeModel,
-    huber_scale: float | None,
+    losses: float | None | EdgeLosses,
     with_jacobians: bool,
 ) -> tuple[FloatArray, FloatArray | None]:
     """Whitened (and robustified) residuals ``(E, 3)`` and Jacobians ``(E, 2, 3, 3)``.
 
-    ``jac[:, 0]`` is d r / d pose_i and ``jac[:, 1]`` is d r / d pose_j. With a Huber scale the
-    residual is ``sqrt(rho(s)/s) r`` so that its squared norm is ``rho(s)``.
+    ``jac[:, 0]`` is d r / d pose_i and ``jac[:, 1]`` is d r / d pose_j. ``losses`` is a Huber
+    scale (every edge), None (plain least squares) or kernels per edge
+    (:func:`~cogmap_core.robust.apply_kernel`): a robust residual is ``sqrt(rho(s)/s) r`` so
+    that its squared norm is ``rho(s)``.
     """
     theta = pose_i[:, 2]
     c, s = np.cos(theta), np.sin(theta)
@@ -211,49 +247,38 @@ def edge_terms(
         d[:, 1, 1, 0], d[:, 1, 1, 1] = -s, c
         d[:, 1, 2, 2] = 1.0
         jac = np.matmul(w[:, None], d)
-    if huber_scale is not None:
-        res, jac = _apply_huber(res, jac, huber_scale)
-    return res, jac
-
-
-def _apply_huber(
-    res: FloatArray, jac: FloatArray | None, scale: float
-) -> tuple[FloatArray, FloatArray | None]:
-    """Square-root Huber reformulation, exact in value and derivative."""
-    sq = np.einsum("ka,ka->k", res, res)
-    outer = sq > scale * scale
-    if not outer.any():
-        return res, jac
-    res = res.copy()
-    s_out = sq[outer]
-    root = np.sqrt(s_out)
-    rho = 2.0 * scale * root - scale * scale
-    phi = np.sqrt(rho / s_out)
-    r_out = res[outer]
-    res[outer] = phi[:, None] * r_out
-    if jac is not None:
-        jac = jac.copy()
-        drho = scale / root
-        dphi = (drho * s_out - rho) / (2.0 * s_out * s_out * phi)
-        j_out = jac[outer]
-        r_j = np.einsum("ka,knab->knb", r_out, j_out)
-        jac[outer] = (
-            phi[:, None, None, None] * j_out
-            + 2.0 * dphi[:, None, None, None] * r_out[:, None, :, None] * r_j[:, :, None, :]
-        )
+    if losses is None or isinstance(losses, int | float):
+        losses = edge_losses(losses)
+    for rows, kernel in losses:
+        res, jac = apply_kernel(res, jac, kernel, rows)
     return res, jac
 
 
 def graph_cost(
-    graph: PoseGraph, poses: FloatArray | None = None, huber_scale: float | None = None
+    graph: PoseGraph,
+    poses: FloatArray | None = None,
+    huber_scale: float | None = None,
+    losses: EdgeLosses | None = None,
 ) -> float:
-    """g2o cost ``1/2 sum rho(|S r|^2)`` of ``graph`` at ``poses`` (default: its own poses)."""
+    """g2o cost ``1/2 sum rho(|S r|^2)`` of ``graph`` at ``poses`` (default: its own poses).
+
+    ``rho`` is Huber at ``huber_scale`` on every edge, or the kernels of ``losses`` if given.
+    """
     if graph.num_edges == 0:
         return 0.0
     x = graph.poses if poses is None else poses
     model = EdgeModel(graph.measurements, graph.information)
-    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, huber_scale, False)
+    loss = edge_losses(huber_scale) if losses is None else losses
+    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, loss, False)
     return 0.5 * float(np.einsum("ka,ka->", res, res))
+
+
+def chi2(graph: PoseGraph, poses: FloatArray | None = None) -> FloatArray:
+    """``(E,)`` squared whitened residual of every edge (no kernel) at ``poses``."""
+    x = graph.poses if poses is None else poses
+    model = EdgeModel(graph.measurements, graph.information)
+    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, None, False)
+    return np.einsum("ka,ka->k", res, res)
 
 
 # --------------------------------------------------------------------------------------------
@@ -360,7 +385,7 @@ class _Snapshot:
         edge_from: IntArray,
         edge_to: IntArray,
         model: EdgeModel,
-        huber_scale: float | None,
+        losses: EdgeLosses,
         plan: _Plan,
         num_chunks: int,
     ) -> None:
@@ -368,7 +393,7 @@ class _Snapshot:
         self.edge_from = edge_from
         self.edge_to = edge_to
         self.model = model
-        self.huber_scale = huber_scale
+        self.losses = losses  # edges in the snapshot's (sorted) order
         self.chunk_bytes: list[bytes | None] = [None] * num_chunks
         self.residuals = np.zeros(0)
         self.dense = np.zeros(plan.dense_size)
@@ -382,7 +407,7 @@ class _Snapshot:
         self.chunk_bytes = [values.tobytes() for values in chunk_values]
         x = self.poses
         res, jac = edge_terms(
-            x[self.edge_from], x[self.edge_to], self.model, self.huber_scale, with_jacobians
+            x[self.edge_from], x[self.edge_to], self.model, self.losses, with_jacobians
         )
         self.residuals = res.reshape(-1)
         if jac is not None:
@@ -458,7 +483,7 @@ class _EdgeGroupCost(pyceres.CostFunction):
             x[plan.local_from[edges]],
             x[plan.local_to[edges]],
             snap.model.subset(edges),
-            snap.huber_scale,
+            [_subset_loss(rows, kernel, edges) for rows, kernel in snap.losses],
             jacobians is not None,
         )
         residuals[:] = res.reshape(-1)
@@ -505,14 +530,50 @@ def _chunk_bounds(n: int, fixed: NDArray[np.bool_], chunk_size: int) -> list[tup
     return bounds
 
 
+def _subset_loss(
+    rows: NDArray[np.bool_] | None, kernel: Kernel | Weights, index: IntArray | slice
+) -> tuple[NDArray[np.bool_] | None, Kernel | Weights]:
+    """A loss restricted (and reordered) to the edges ``index``."""
+    if isinstance(kernel, Weights):
+        kernel = Weights(kernel.values[index])
+    return (None if rows is None else rows[index], kernel)
+
+
+def _final_losses(graph: PoseGraph, options: OptimizerOptions) -> EdgeLosses:
+    """The kernels of the cost the optimisation minimises, per edge in graph order."""
+    if options.loop_model is None:
+        return edge_losses(options.huber_scale)
+    loops = graph.loop_closures()
+    final: list[tuple[NDArray[np.bool_] | None, Kernel]] = [
+        (loops, options.loop_model.final_kernel)
+    ]
+    if options.huber_scale is not None:
+        final.append((~loops, Kernel("huber", options.huber_scale)))
+    return final
+
+
+def _termination(summary: pyceres.SolverSummary) -> str:
+    """Ceres' termination type as a word (``CONVERGENCE``, ``NO_CONVERGENCE``, ...)."""
+    return str(summary.termination_type).rsplit(".", 1)[-1]
+
+
 def optimize_pose_graph(
-    graph: PoseGraph, options: OptimizerOptions | None = None
+    graph: PoseGraph,
+    options: OptimizerOptions | None = None,
+    new_loops: NDArray[np.bool_] | None = None,
 ) -> OptimizationResult:
     """Optimise ``graph`` with Ceres (sparse normal Cholesky, dynamic sparsity).
 
     The graph's fixed vertices stay put; a connected component without a fixed vertex has its
     first vertex fixed (the gauge). Headings are unconstrained during the solve (residual angles
-    are wrapped) and wrapped to ``[-pi, pi)`` in the result.
+    are wrapped) and wrapped to ``[-pi, pi)`` in the result. With a loop model the loop
+    closures take its kernel, solved by iteratively reweighted least squares
+    (:mod:`cogmap_core.robust`) from the given poses. When it rejects some of the loop
+    closures ``new_loops`` (a map passes those added since its last optimisation), the
+    hypothesis that they are true is solved too -- from the same start, those links under the
+    convex Huber kernel first, so that a drifted estimate cannot hide them -- and the solution
+    of lower robust cost is kept: the maximum a posteriori choice between "they are false" and
+    "the map drifted". Costs are the final kernel's.
 
     Raises:
         OptimizationError: non-finite poses or measurements, or Ceres failed.
@@ -524,12 +585,19 @@ def optimize_pose_graph(
         raise OptimizationError("the pose graph has NaN or infinite poses or measurements")
     n, e = graph.num_vertices, graph.num_edges
     fixed = _gauge_fixed(graph) if n else graph.fixed
+    final_losses = _final_losses(graph, options)
     if e == 0 or fixed.all() or options.max_iterations == 0:
-        initial_cost = graph_cost(graph, huber_scale=options.huber_scale)
+        initial_cost = graph_cost(graph, losses=final_losses)
         poses = graph.poses.copy()
         poses[:, 2] = wrap_angle(poses[:, 2])
         return OptimizationResult(
-            poses, initial_cost, initial_cost, 0, time.perf_counter() - started, "NO_PROBLEM"
+            poses,
+            initial_cost,
+            initial_cost,
+            0,
+            time.perf_counter() - started,
+            "NO_PROBLEM",
+            _rejected(graph, poses, options),
         )
 
     # Ceres reports the cost at the start point; it is computed here only when it decides the
@@ -537,11 +605,11 @@ def optimize_pose_graph(
     initial_cost = math.nan
     use_lago = options.initialization == "lago"
     if options.initialization == "auto":
-        initial_cost = graph_cost(graph, huber_scale=options.huber_scale)
+        initial_cost = graph_cost(graph, losses=final_losses)
         use_lago = initial_cost > AUTO_LAGO_COST_PER_EDGE * e
     if use_lago:
         if math.isnan(initial_cost):
-            initial_cost = graph_cost(graph, huber_scale=options.huber_scale)
+            initial_cost = graph_cost(graph, losses=final_losses)
         work = graph.copy()
         work.fixed = fixed
         with np.errstate(over="ignore", invalid="ignore"):
@@ -567,7 +635,13 @@ def optimize_pose_graph(
     blocks = [poses[a:b].reshape(-1) for a, b in bounds]
     sizes = [3 * (b - a) for a, b in bounds]
     plan = _plan_groups(edge_from, edge_to, chunk_of, chunk_start, chunk_len)
-    snapshot = _Snapshot(poses, edge_from, edge_to, model, options.huber_scale, plan, len(bounds))
+
+    def sorted_losses(losses: EdgeLosses) -> EdgeLosses:
+        return [_subset_loss(rows, kernel, order) for rows, kernel in losses]
+
+    snapshot = _Snapshot(
+        poses, edge_from, edge_to, model, sorted_losses(final_losses), plan, len(bounds)
+    )
 
     problem = pyceres.Problem()
     problem.add_residual_block(_SnapshotCost(snapshot, sizes), None, blocks)
@@ -589,22 +663,100 @@ def optimize_pose_graph(
     solver_options.function_tolerance = options.function_tolerance
     solver_options.initial_trust_region_radius = 1e8
     solver_options.logging_type = pyceres.LoggingType.SILENT
-    summary = pyceres.SolverSummary()
-    pyceres.solve(solver_options, problem, summary)
-    termination = str(summary.termination_type).rsplit(".", 1)[-1]
-    if termination == "FAILURE" or not np.isfinite(poses).all():
-        raise OptimizationError(f"Ceres failed: {' '.join(str(summary.message).split())}")
+    loops = graph.loop_closures()
+    rest = list(final_losses[1:])  # the Huber loss of the other edges, if any
+
+    def solve(reweighting: Reweighting | None) -> tuple[int, str, float, float]:
+        """Run Ceres once, or IRLS rounds: iterations, termination, Ceres' costs (once)."""
+        if reweighting is None:
+            summary = pyceres.SolverSummary()
+            pyceres.solve(solver_options, problem, summary)
+            check(summary)
+            # Ceres' cost is the robust cost itself (the snapshot residual is zero)
+            costs = float(summary.initial_cost), float(summary.final_cost)
+            return steps(summary), _termination(summary), *costs
+        count = 0
+        solver_options.max_num_iterations = min(IRLS_ITERATIONS, options.max_iterations)
+        while True:  # one round of IRLS: the loop closures' weights, fixed
+            cost = graph_cost(graph, poses, losses=final_losses)
+            weights = reweighting.next(chi2(graph, poses), cost)
+            if weights is None:
+                break
+            snapshot.losses = sorted_losses([(loops, Weights(weights)), *rest])
+            snapshot.chunk_bytes = [None] * len(bounds)  # the cost changed: no stale snapshot
+            summary = pyceres.SolverSummary()
+            pyceres.solve(solver_options, problem, summary)
+            check(summary)
+            count += steps(summary)
+        termination = "CONVERGENCE" if reweighting.converged else "NO_CONVERGENCE"
+        return count, termination, math.nan, math.nan
+
+    def check(summary: pyceres.SolverSummary) -> None:
+        if _termination(summary) == "FAILURE" or not np.isfinite(poses).all():
+            raise OptimizationError(f"Ceres failed: {' '.join(str(summary.message).split())}")
+
+    def steps(summary: pyceres.SolverSummary) -> int:
+        # Ceres counts the evaluation at the start point as a successful step: leave it out.
+        return int(summary.num_successful_steps + summary.num_unsuccessful_steps) - 1
+
+    reweightings = 0
+    if options.loop_model is None or not loops.any():
+        iterations, termination, ceres_initial, final_cost = solve(None)
+        if not use_lago:
+            initial_cost = ceres_initial
+    else:
+        start = poses.copy()
+        reweighting = Reweighting(options.loop_model, loops)
+        iterations, termination, _, _ = solve(reweighting)
+        reweightings = reweighting.rounds
+        final_cost = graph_cost(graph, poses, losses=final_losses)
+        doubted = None
+        if new_loops is not None:
+            doubted = loops & new_loops & _rejected(graph, poses, options)
+        if doubted is not None and doubted.any():
+            # The other hypothesis: the new links it rejected are true and the start is only
+            # drifted. From the same start, those links are solved under the convex Huber
+            # kernel (the other loop closures keep their weights at the start), then IRLS goes
+            # on as before; the solution of lower robust cost is kept.
+            kept = poses.copy()
+            poses[:] = start
+            kernel = options.loop_model.final_kernel
+            weights = drop_small(np.where(loops, kernel.weight(chi2(graph, start)), 1.0))
+            convex_losses: EdgeLosses = [
+                (doubted, Kernel("huber", kernel.scale)),
+                (loops & ~doubted, Weights(weights)),
+                *rest,
+            ]
+            snapshot.losses = sorted_losses(convex_losses)
+            snapshot.chunk_bytes = [None] * len(bounds)
+            solver_options.max_num_iterations = options.max_iterations
+            convex, _, _, _ = solve(None)
+            hypothesis = Reweighting(options.loop_model, loops)
+            more, other_termination, _, _ = solve(hypothesis)
+            iterations += convex + more
+            reweightings += hypothesis.rounds
+            other_cost = graph_cost(graph, poses, losses=final_losses)
+            if other_cost < final_cost:
+                final_cost, termination = other_cost, other_termination
+            else:
+                poses[:] = kept
     poses[:, 2] = wrap_angle(poses[:, 2])
-    # Ceres' cost is the robust cost itself (the snapshot residual is zero)
-    final_cost = float(summary.final_cost)
-    if not use_lago:
-        initial_cost = float(summary.initial_cost)
+    if math.isnan(initial_cost):
+        initial_cost = graph_cost(graph, losses=final_losses)
     return OptimizationResult(
         poses=poses,
         initial_cost=initial_cost,
         final_cost=final_cost,
-        # Ceres counts the evaluation at the start point as a successful step: leave it out.
-        iterations=int(summary.num_successful_steps + summary.num_unsuccessful_steps) - 1,
+        iterations=iterations,
         wall_s=time.perf_counter() - started,
         termination=termination,
+        rejected=_rejected(graph, poses, options),
+        reweightings=reweightings,
     )
+
+
+def _rejected(graph: PoseGraph, poses: FloatArray, options: OptimizerOptions) -> NDArray[np.bool_]:
+    """Loop closures whose chi^2 at ``poses`` is past the loop model's kernel scale."""
+    if options.loop_model is None or graph.num_edges == 0:
+        return np.zeros(graph.num_edges, dtype=bool)
+    return graph.loop_closures() & options.loop_model.final_kernel.rejects(chi2(graph, poses))

@@ -24,6 +24,9 @@ class PoseGraph:
         measurements: ``(E, 3)`` relative pose of ``to`` in the frame of ``from`` (dx, dy, dtheta).
         information: ``(E, 3, 3)`` symmetric positive-definite information matrices.
         fixed: ``(N,)`` vertices held constant by the optimiser.
+        loop_closure: ``(E,)`` which edges are loop closures (a robust loop-closure model
+            judges only these); None: the edges between vertices whose ids are not consecutive
+            (:meth:`loop_closures`).
 
     """
 
@@ -34,6 +37,7 @@ class PoseGraph:
     measurements: NDArray[np.float64]
     information: NDArray[np.float64]
     fixed: NDArray[np.bool_] = field(default_factory=lambda: _default_fixed(0))
+    loop_closure: NDArray[np.bool_] | None = None
 
     def __post_init__(self) -> None:
         """Normalise dtypes and shapes."""
@@ -45,6 +49,8 @@ class PoseGraph:
         self.information = np.asarray(self.information, dtype=np.float64).reshape(-1, 3, 3)
         if self.fixed.shape != (len(self.poses),):
             self.fixed = _default_fixed(len(self.poses))
+        if self.loop_closure is not None:
+            self.loop_closure = np.asarray(self.loop_closure, dtype=bool).reshape(-1)
 
     @property
     def num_vertices(self) -> int:
@@ -66,7 +72,18 @@ class PoseGraph:
             self.measurements.copy(),
             self.information.copy(),
             self.fixed.copy(),
+            None if self.loop_closure is None else self.loop_closure.copy(),
         )
+
+    def loop_closures(self) -> NDArray[np.bool_]:
+        """Which edges are loop closures: as set, else those joining non-consecutive vertex ids.
+
+        The second is how g2o benchmark files mark them: odometry joins ``i`` and ``i + 1``.
+        """
+        if self.loop_closure is not None:
+            return self.loop_closure
+        ids = self.vertex_ids
+        return np.abs(ids[self.edge_to] - ids[self.edge_from]) != 1
 
     def with_poses(self, poses: NDArray[np.float64]) -> PoseGraph:
         """Same graph with other vertex poses."""
