@@ -54,7 +54,11 @@ from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot
 from cogmap_core.neighborhood_fields import is_novel, neighborhood_field
 from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph
 from cogmap_core.posegraph import PoseGraph
-from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate, RobotInMap
+from cogmap_core.relocalisation import (
+    RelocalisationCheck,
+    RelocalisationGate,
+    RobotInMap,
+)
 from cogmap_core.scene_integration import SceneIntegration
 from cogmap_core.short_edges import remove_short_edges
 
@@ -477,6 +481,9 @@ class CognitiveMap:
         graph = self.graph
         if self._edges_at_last_optimization == graph.num_edges_total and self._optimized_once:
             return None  # no edge added since the last optimisation: it would change nothing
+        # the edges added since the last optimisation: the robust loop model weighs the
+        # hypothesis that its new links are true against the one that they are false
+        new_edges = graph.live_edges() >= self._edges_at_last_optimization
         self._edges_at_last_optimization = graph.num_edges_total
         self._optimized_once = True
         pose_graph = self.to_pose_graph()
@@ -486,8 +493,12 @@ class CognitiveMap:
         result = optimize_pose_graph(
             pose_graph,
             OptimizerOptions(
-                huber_scale=self.params.huber_scale, initialization="none", function_tolerance=1e-5
+                huber_scale=self.params.huber_scale,
+                initialization="none",
+                function_tolerance=1e-5,
+                loop_model=self.params.loop_closure_model(),
             ),
+            new_loops=new_edges,
         )
         wall = wallclock.perf_counter() - started
         graph.pose[pose_graph.vertex_ids] = result.poses

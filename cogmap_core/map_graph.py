@@ -346,4 +346,5 @@ class MapGraph:
             measurements=self.edge_rel[e].copy(),
             information=edge_information(self.edge_kind[e], self.edge_rel[e], link_sigmas),
             fixed=fixed,
+            loop_closure=self.edge_kind[e] == EdgeKind.LOOP_CLOSURE,
         )

@@ -25,7 +25,7 @@ false_log = support.false_log
 
 
 def _frame_image(bag: Path, index: int) -> np.ndarray:
-    with open_bag(bag, image_scale=4) as reader:
+    with open_bag(bag, image_scale=1) as reader:  # the full-size decode the app uses
         for k, frame in enumerate(reader.frames()):
             if k == index:
                 return frame.image

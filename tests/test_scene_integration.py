@@ -273,12 +273,13 @@ def test_integration_max_residual_keeps_revisits_whose_closing_link_disagrees():
     loop.first_lap()
     loop.known_lap(propose={30})
     v = loop.new[0]
-    # the closing link claims the robot is at position 34 (0.15 m ahead): it contradicts
-    # odometry, and the optimisation cannot satisfy it
+    # the closing link claims the robot is at position 35 (0.2 m ahead): it contradicts
+    # odometry, and the optimisation cannot satisfy it (0.15 m ahead left 0.101 m after the
+    # paper's Huber and 0.0995 m after the robust loop model: on the 0.1 m limit either way)
     events = loop.s.events
     k = next(i for i, e in enumerate(events) if getattr(e, "target", None) == loop.first[31])
-    events[k] = type(events[k])(events[k].time, loop.first[34], events[k].relative_rad)
-    events[k + 1] = type(events[k + 1])(events[k + 1].time, loop.first[34], 0.0)
+    events[k] = type(events[k])(events[k].time, loop.first[35], events[k].relative_rad)
+    events[k + 1] = type(events[k + 1])(events[k + 1].time, loop.first[35], 0.0)
     kept = build("scene_integration", loop.s, **NO_GATE)
     assert v in alive(kept)
     merged = build("scene_integration", loop.s, integration_max_residual=1.0, **NO_GATE)

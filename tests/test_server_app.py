@@ -57,7 +57,8 @@ CHANGES: tuple[tuple[str, float], ...] = (
     ("delta", 8.0),
     ("t_interval", 0.1),
     ("t_total", 1.0),
-    ("huber_scale", 0.02),
+    ("huber_scale", 0.01),
+    ("loop_scale", 0.2),
     ("short_edge_threshold", 0.3),
 )
 

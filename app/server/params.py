@@ -48,7 +48,17 @@ SLIDERS: tuple[SliderSpec, ...] = (
     SliderSpec("T_total", "t_total", 1.0, 500.0, 1.0, "cluster total-time threshold (s)"),
 )
 ADVANCED_SLIDERS: tuple[SliderSpec, ...] = (
-    SliderSpec("Huber scale", "huber_scale", 0.01, 2.0, 0.01, "Huber loss scale (m, rad)"),
+    SliderSpec(
+        "Huber scale",
+        "huber_scale",
+        0.01,
+        2.0,
+        0.01,
+        "Huber loss scale (m, rad): odometry edges; every edge with the paper's loop model",
+    ),
+    SliderSpec(
+        "loop scale", "loop_scale", 0.2, 10.0, 0.1, "robust loop-closure kernel scale (link σ)"
+    ),
     SliderSpec(
         "short edge (m)", "short_edge_threshold", 0.0, 0.5, 0.005, "edges shorter are removed"
     ),

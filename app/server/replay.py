@@ -84,6 +84,8 @@ _CLUSTERING_AND_OPTIMISATION = frozenset(
         "gate_drift_position",
         "gate_drift_heading",
         "gate_consensus",
+        "loop_model",
+        "loop_scale",
     }
 )
 _INTEGRATION = frozenset({"integration_radius", "integration_max_residual", "integration_min_age"})
