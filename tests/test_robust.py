@@ -16,7 +16,9 @@ from cogmap_core.geometry import between, compose
 from cogmap_core.optimizer import OptimizerOptions, chi2, graph_cost, optimize_pose_graph
 from cogmap_core.posegraph import PoseGraph
 from cogmap_core.robust import (
+    DEFAULT_LOOP_KERNEL,
     DROP_WEIGHT,
+    MAP_IRLS_TOLERANCE,
     Kernel,
     LoopClosureModel,
     Reweighting,
@@ -24,6 +26,7 @@ from cogmap_core.robust import (
     apply_kernel,
     loop_closure_model,
 )
+from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
 
 
 # ------------------------------------------------------------------------------- kernels
@@ -113,11 +116,29 @@ def test_reweighting_drops_tiny_weights_and_stops_when_the_cost_settles():
     assert schedule.converged and schedule.rounds == 1
 
 
+def test_reweighting_stops_at_the_models_tolerance():
+    loops = np.array([True])
+    for tolerance, rounds in ((1e-3, 1), (1e-5, 2)):
+        schedule = Reweighting(LoopClosureModel(tolerance=tolerance), loops)
+        assert schedule.next(np.array([0.5]), 10.0) is not None
+        if rounds == 2:  # a change of 0.05 % is past 1e-5 but within 1e-3
+            assert schedule.next(np.array([0.5]), 10.005) is not None
+        assert schedule.next(np.array([0.5]), 10.0049) is None
+        assert schedule.rounds == rounds
+    with pytest.raises(ParameterError, match="IRLS tolerance 0 must be in"):
+        LoopClosureModel(tolerance=0)
+
+
 def test_loop_model_codes():
     assert loop_closure_model(0, 1.0) is None
     assert loop_closure_model(2, 1.5) == LoopClosureModel("geman_mcclure", 1.5)
     assert loop_closure_model(5, 1.0) == LoopClosureModel("geman_mcclure", 1.0, graduated=True)
-    assert MapParams().loop_closure_model() == LoopClosureModel("geman_mcclure", 1.0)
+    # the maps' scale is in link sigmas: 3 x 3 cm for a bag, 3 x 0.5 m for a log
+    bag, log = MapParams().loop_closure_model(), LOG_MAP_PARAMS.loop_closure_model()
+    assert bag is not None and log is not None
+    assert (bag.kernel, bag.graduated, bag.tolerance) == ("geman_mcclure", False, 1e-3)
+    assert bag.scale == pytest.approx(0.09, abs=1e-15) and MAP_IRLS_TOLERANCE == 1e-3
+    assert log.scale == pytest.approx(1.5, abs=1e-15) and log.kernel == "geman_mcclure"
     with pytest.raises(ParameterError, match="loop_model=2.5 is out of range"):
         MapParams(loop_model=2.5)
     with pytest.raises(ParameterError, match="loop_model=True is not a number"):
@@ -267,7 +288,9 @@ def test_cli_robust_adds_the_loop_closures_and_rejections(tmp_path, capsys):
     report = json.loads(capsys.readouterr().out)
     assert report["loop_closures"] == loops
     assert report["loop_closures_rejected"] == 7
-    assert main(["optimize", str(source), str(out), "--robust", "dcs", "--init", "none"]) == 0
+    assert DEFAULT_LOOP_KERNEL == "dcs"
+    command = ["optimize", str(source), str(out), "--robust", "geman_mcclure", "--init", "none"]
+    assert main(command) == 0
     assert json.loads(capsys.readouterr().out)["loop_closures_rejected"] == 7
     assert main(["optimize", str(source), str(out), "--init", "none"]) == 0
     assert "loop_closures" not in json.loads(capsys.readouterr().out)
@@ -281,3 +304,27 @@ def test_cli_refuses_an_unknown_kernel(tmp_path, capsys):
         main(["optimize", str(source), str(tmp_path / "o.g2o"), "--robust", "tukey"])
     assert exit_info.value.code == 2
     assert "invalid choice: 'tukey'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("mode", "rejected"),
+    [("standard", [(29, 70), (70, 31)]), ("scene_integration", [(29, 70), (70, 31)])],
+)
+def test_a_map_rejects_the_false_relocalisation_it_was_made_to_follow(mode, rejected):
+    # the relocalisation test off: the map follows the false claim (29 -> 70, then back to 31)
+    from tests.test_relocalisation import NO_GATE, PAPER, build, false_relocalisation_lap
+
+    loop, wrong = false_relocalisation_lap()
+    assert wrong == 70
+    cmap = build(mode, loop.s.events, **NO_GATE)
+    snap = cmap.snapshot()
+    mask = cmap.rejected_loop_edges()
+    pairs = list(zip(snap.edge_from[mask].tolist(), snap.edge_to[mask].tolist(), strict=True))
+    assert pairs == rejected
+    truth = np.array([loop.s.truth[v] for v in snap.vertex_ids.tolist()])
+    assert np.abs(snap.poses[:, :2] - truth[:, :2]).max() < 1e-3  # the map stays true
+    huber = build(mode, loop.s.events, **PAPER)  # the paper's map bends
+    assert not huber.rejected_loop_edges().any()
+    huber_snap = huber.snapshot()
+    huber_truth = np.array([loop.s.truth[v] for v in huber_snap.vertex_ids.tolist()])
+    assert np.abs(huber_snap.poses[:, :2] - huber_truth[:, :2]).max() > 0.1
