@@ -47,6 +47,7 @@ from cogmap_core.slam import (
     SlamSession,
     link_resolution,
     map_false_loop_edges,
+    map_rejected_loop_edges,
     optimisation_summary,
 )
 from cogmap_core.sources.detect import (
@@ -135,7 +136,8 @@ class RunResult:
         radius = self.summary.get("layout_radius_m", LAYOUT_RADIUS)
         lines = [
             f"{'map':18} {'vertices':>8} {'edges':>7} {'E/V':>5} {'loops':>6} {'clusters':>8} "
-            f"{'optims':>6} {'opt s':>6} {'ATE m':>7} {'compl':>6} {'corr':>6}"
+            f"{'optims':>6} {'opt s':>6} {'ATE m':>7} {'compl':>6} {'corr':>6} "
+            f"{'rejected (true)':>15}"
         ]
 
         def fmt(value: float | None, spec: str) -> str:
@@ -147,7 +149,8 @@ class RunResult:
                 f"{fmt(m['edges_per_vertex'], '5.2f')} "
                 f"{m['loop_edges']:6d} {m['clusters']:8d} {m['optimizations']:6d} "
                 f"{m['optimize_wall_s']:6.2f} {fmt(m['ate_m'], '7.3f'):>7} "
-                f"{fmt(m['completeness'], '6.3f'):>6} {fmt(m['correctness'], '6.3f'):>6}"
+                f"{fmt(m['completeness'], '6.3f'):>6} {fmt(m['correctness'], '6.3f'):>6} "
+                f"{_rejected_cell(m):>15}"
             )
         s = self.summary
         lc = s["loop_closures"]
@@ -165,6 +168,14 @@ class RunResult:
             f"(precision {precision}, {judged})"
         )
         return "\n".join(lines)
+
+
+def _rejected_cell(entry: dict[str, Any]) -> str:
+    """``N (T)``: loop-closure edges the loop model rejected (of them true), or ``N``."""
+    rejected, true = entry.get("rejected_loop_edges"), entry.get("rejected_true_loop_edges")
+    if rejected is None:
+        return "-"
+    return f"{rejected}" if true is None else f"{rejected} ({true})"
 
 
 @dataclass(frozen=True, slots=True)
@@ -256,6 +267,12 @@ def session_summary(
         # loop-closure edges of the map made from a link the ground truth calls false (the
         # page's "false loop closures in the map"; None without ground truth)
         entry["false_loop_edges"] = map_false_loop_edges(session.log, cmap, judging, final.snapshot)
+        # the loop model's verdict at the final estimate, and (ground truth) how many were true
+        rejected, rejected_true = map_rejected_loop_edges(
+            session.log, cmap, judging, final.snapshot
+        )
+        entry["rejected_loop_edges"] = rejected
+        entry["rejected_true_loop_edges"] = rejected_true
         entries[mode.value] = entry
     score = session.loop_closure_score()
     links = session.log.link_table()

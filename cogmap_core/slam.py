@@ -697,6 +697,34 @@ def map_false_loop_edges(
     return int(np.count_nonzero(false_loop_edges(edge_links, false)))
 
 
+def map_rejected_loop_edges(
+    log: EventLog,
+    cmap: CognitiveMap,
+    judging: EvaluationSettings | None = None,
+    snapshot: MapSnapshot | None = None,
+) -> tuple[int, int | None]:
+    """How many of a map's loop-closure edges its loop model rejects, and how many of them true.
+
+    Rejected: :meth:`~cogmap_core.cognitive_map.CognitiveMap.rejected_loop_edges`. True: made
+    from a link the ground truth does not call false (as :func:`map_false_loop_edges` judges;
+    None without ground truth). ``snapshot``: the map's snapshot when the caller has one.
+    """
+    judging = judging or EvaluationSettings()
+    rejected = cmap.rejected_loop_edges()
+    false = log.false_links(judging.loop_distance, judging.loop_heading)
+    if false is None:
+        return int(np.count_nonzero(rejected)), None
+    snap = cmap.snapshot() if snapshot is None else snapshot
+    alias, refused = link_resolution(cmap)
+    links = log.link_table()
+    edge_links = loop_edge_links(
+        np.array([t for t, _, _ in links]), np.array([g for _, g, _ in links], dtype=np.int64),
+        snap, alias, refused,
+    )  # fmt: skip
+    made_false = false_loop_edges(edge_links, false)
+    return int(np.count_nonzero(rejected)), int(np.count_nonzero(rejected & ~made_false))
+
+
 def optimisation_summary(cmap: CognitiveMap) -> dict[str, float | int]:
     """Counts and timing of a map's optimisations and loop closures."""
     return {

@@ -18,7 +18,7 @@ from cogmap_core.evaluation import absolute_trajectory_error
 from cogmap_core.event_file import load_event_file
 from cogmap_core.g2o import read_g2o
 from cogmap_core.map_graph import MapSnapshot
-from cogmap_core.slam import SlamSession, map_false_loop_edges
+from cogmap_core.slam import SlamSession, map_false_loop_edges, map_rejected_loop_edges
 from tests.test_faults import one_line_error
 
 SUMMARY_KEYS = {
@@ -53,6 +53,8 @@ MAP_KEYS = {
     "duplicate_links",
     "refused_relocalisations",
     "false_loop_edges",  # issue 25: the page's "false loop closures in the map"
+    "rejected_loop_edges",  # issue 28: the loop model's verdict, and how many were true
+    "rejected_true_loop_edges",
 }
 
 
@@ -117,6 +119,9 @@ def test_summary_matches_the_bag_and_ground_truth(report: Path, maze_bag: Path, 
         assert entry["refused_relocalisations"] == cmap.counters.refused_relocalisations
         assert entry["false_loop_edges"] == map_false_loop_edges(reference.log, cmap)
         assert 0 <= entry["false_loop_edges"] <= summary["loop_closures"]["false"]
+        rejected = (entry["rejected_loop_edges"], entry["rejected_true_loop_edges"])
+        assert rejected == map_rejected_loop_edges(reference.log, cmap)
+        assert rejected[0] == int(cmap.rejected_loop_edges().sum()) >= rejected[1]
         # against the ground truth: the maps keep the layout and stay with dead reckoning, which
         # on this 2-lap bag is already within 3 cm -- about the error of a loop closure itself
         # (the 6-lap targets, ATE <= 0.5 x dead reckoning, are benchmarks/map_layouts.py's)
