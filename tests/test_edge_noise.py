@@ -66,11 +66,15 @@ def coarse_return(params: MapParams) -> float:
 
 
 def test_a_coarse_link_weighed_by_its_precision_does_not_bend_precise_odometry() -> None:
-    no_gate = MapParams(gate_position=1e9, gate_heading=1e9)
-    # weighed like RatSLAM's view matching (3 cm), the link drags the return leg onto the start
+    no_gate = MapParams(gate_position=1e9, gate_heading=1e9, loop_model=0.0)
+    # under the paper's Huber, weighed like RatSLAM's view matching (3 cm), the link drags the
+    # return leg onto the start
     assert coarse_return(no_gate) < 0.1
     # weighed like place recognition (0.5 m), the odometry's 0.4 m stands
     assert coarse_return(no_gate.with_changes(link_sigma_position=0.5, huber_scale=0.5)) > 0.3
+    # the default robust loop model rejects a 3 cm link 0.4 m off (13 sigmas): odometry stands
+    # (the rejected link keeps Geman-McClure's weight (0.09^2 / (0.09^2 + 0.4^2))^2 = 0.002)
+    assert 0.35 < coarse_return(no_gate.with_changes(loop_model=2.0)) < 0.4
 
 
 def test_logs_weigh_links_as_place_recognition_and_bags_as_view_matching() -> None:

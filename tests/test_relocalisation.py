@@ -14,7 +14,8 @@ from cogmap_core.events import LinkToVertex, SetCurrentVertex
 from cogmap_core.slam import EventLog
 from tests.test_scene_integration import LAP, SquareLoop
 
-PAPER = {"gate_position": 1e9, "gate_heading": 1e9}  # accept every relocalisation
+NO_GATE = {"gate_position": 1e9, "gate_heading": 1e9}  # accept every relocalisation
+PAPER = {**NO_GATE, "loop_model": 0.0}  # ... and judge loop closures with Huber, as the paper
 
 
 def build(mode: str, events: list, **params: float) -> CognitiveMap:
