@@ -70,6 +70,7 @@ from app.server.params import (
 )
 from app.server.rebuild import make_builder
 from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
+from app.server.routes import RouteWorker, TruthGraphs, plan_routes, route_inputs, route_problem
 from app.server.scene import MapExtras, SceneStreamer, cluster_color
 from app.server.validation import (
     Adjusted,
@@ -270,6 +271,9 @@ class CogmapApp:
         self._figures_stop = False
         self._figures_busy = False
         threading.Thread(target=self._figures_loop, name="cogmap-figures", daemon=True).start()
+        # routes (issue 26): a view's callbacks flag it, this worker computes and draws
+        self._truth_graphs = TruthGraphs()
+        self.routes: RouteWorker[ClientView] = RouteWorker(self._route_work)
         self.started_at = time.monotonic()
         self.replay = self._make_replay(
             bag, params, speed, autoplay and not wait_for_viewer, fmt=fmt, log=log, resume=resume
@@ -331,7 +335,7 @@ class CogmapApp:
         while time.monotonic() < deadline:
             with self._figures_cond:
                 done = not self._figures_todo and not self._figures_busy
-            if done:
+            if done and self.routes.idle():
                 return True
             time.sleep(0.01)
         return False
@@ -339,6 +343,7 @@ class CogmapApp:
     def stop(self) -> None:
         """Stop the replay worker (the server is stopped by its owner)."""
         self.replay.stop()
+        self.routes.stop()
         with self._figures_cond:
             self._figures_stop = True
             self._figures_cond.notify()
@@ -361,6 +366,7 @@ class CogmapApp:
 
         # what a click picked comes first: it shows next to the map, never below the fold
         self.inspect_folder = gui.add_folder("Inspect — yours")
+        self.route_folder = gui.add_folder("Route — yours")
         self.view_folder = gui.add_folder("View — yours")
         self.compare_folder = gui.add_folder("Compare with a pinned map — yours")
 
@@ -1033,6 +1039,45 @@ class CogmapApp:
             self._update_counters()
         self._refresh_views()
 
+    def _route_work(self, view: ClientView) -> None:
+        """Find and draw the routes of ``view``'s two places (on the route worker's thread).
+
+        The maps, the alignments the scene shows and the true path so far are copied under the
+        replay's lock; the routes are computed without it (:mod:`app.server.routes`).
+        """
+        if view.closed:
+            return
+        places = view.route_places
+        if len(places) < 2:
+            return
+        modes = view.route_modes()
+        with self.replay.lock:
+            maps = self.replay.session.maps
+            snapshots = {mode: maps[mode].snapshot() for mode in modes}
+            transforms = {
+                mode: None if (f := self._figures.get(mode)) is None else f.truth_transform
+                for mode in modes
+            }
+            log_ = self.replay.session.log
+            truth = None
+            key: tuple[int, ...] = ()
+            if log_.has_ground_truth():
+                count = min(self.replay.cursor, len(log_.ground_truth))
+                truth = np.array(log_.ground_truth[:count, :2])
+                key = (id(log_), count)
+        try:
+            inputs = route_inputs(snapshots, transforms, truth, key)
+            graph = None
+            if inputs.truth is not None:
+                graph = self._truth_graphs.get(inputs.truth, inputs.truth_key)
+            plan = plan_routes(inputs, places[0], places[1], modes, graph)
+        except Exception as exc:
+            if not isinstance(exc, CogmapError):
+                traceback.print_exc()
+            view.route_failed(places, self.scrubber.scrub(route_problem(exc)))
+            return
+        view.show_route(plan)
+
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log
         key = (id(log_), log_.frames)  # the whole log's path, cut at the cursor on every call:
@@ -1557,6 +1602,7 @@ class CogmapApp:
             self.replay.start()
         for view in list(self.views.values()):  # what a tab picked was the old input's
             view.select(None)
+            view.clear_route()
         if switched:
             self.reset_button.label = self._reset_label()
             self.reset_params()  # the sliders show the kind's defaults (no rebuild: in use)
