@@ -5,7 +5,8 @@ every tuning parameter -- a valid value, one out of range, garbage -- and see th
 change to what ``SlamSession.rebuild`` gives (the time from Enter to the counter is printed),
 switch maps, show two side by side, click a vertex, ask for a route between two places (issue
 26), pin the map and compare after a change, open a second tab with a view of its own, play and
-pause with the space bar, export summary.json and an HTML replay. Screenshots of the final states are saved as artifacts (their paths are printed).
+pause with the space bar, export summary.json and an HTML replay. Screenshots of the final
+states are saved as artifacts (their paths are printed).
 
 Skipped when Chromium is not installed, unless ``COGMAP_REQUIRE_BROWSER`` is set (CI sets it):
 then a missing browser is a failure.
