@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import viser
 import viser.uplot
+from numpy.typing import NDArray
 
 from app.server.assets import head_html, help_markdown
 from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, x_end, y_top
@@ -139,6 +140,16 @@ def recent_links(log: EventLog, frames: int, count: int) -> list[tuple[float, in
 
 def _log_refusal(note: Refusal | Adjustment) -> None:
     log.warning("GUI value from a client %s", note.message)
+
+
+def camera_rgb(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The camera panel's picture of a frame's image: red, green, blue ``(h, w, 3)``.
+
+    A grey image in its three channels; a colour one (blue, green, red, as a colour camera's
+    frames are in OpenRatSLAM's arithmetic) in its own colours.
+    """
+    rgb = image[:, :, ::-1] if image.ndim == 3 else np.repeat(image[:, :, None], 3, axis=2)
+    return np.ascontiguousarray(rgb)
 
 
 class _RateLimit:
@@ -841,7 +852,7 @@ class CogmapApp:
         for handle in (self.camera_image, self.template_image):
             if not handle.visible:  # (hidden while a log was replayed)
                 handle.visible = True
-        self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
+        self.camera_image.image = camera_rgb(frame.image)
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
             f"view template **{template}** · frame {index + 1} / {r.total_frames} · "
