@@ -3,7 +3,7 @@ template and visual-odometry profiles average blue, green and red as OpenRatSLAM
 ``bgr8`` image (``local_view_match.cpp`` / ``visual_odometry.cpp``: a block's sum of B + G + R,
 divided by 255 * 3, then by its pixels) -- exactly; a grey camera is decoded and averaged as
 before; cogmap's whole-crop setting takes a colour image's luma. Bags, image folders and the
-decoder, videos and the camera panel, on small colour images."""
+decoder, videos, the camera panel and the page's list of inputs, on small colour images."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ from cogmap_core.frontend import FrontEndConfig, LocalViewCells
 from cogmap_core.frontend.config import COGMAP_ARITHMETIC
 from cogmap_core.frontend.local_view import VALUE_SCALE, averages_colour
 from cogmap_core.frontend.visual_odometry import VisualOdometry
+from cogmap_core.sources.detect import CameraOptions
 
 OPENRATSLAM = FrontEndConfig()  # its arithmetic is the default
 WHOLE = FrontEndConfig(**COGMAP_ARITHMETIC)
@@ -292,3 +293,35 @@ def test_the_camera_panel_shows_red_green_blue() -> None:
     np.testing.assert_array_equal(rgb[:, :, 2], image[:, :, 0])  # blue
     grey = image[:, :, 1].copy()
     np.testing.assert_array_equal(camera_rgb(grey), np.dstack([grey] * 3))
+
+
+def test_the_page_lists_and_opens_videos_and_image_folders(tmp_path: Path) -> None:
+    from tests.test_server_support import running_app, wait
+
+    data = tmp_path / "data"
+    folder = data / "colour"
+    folder.mkdir(parents=True)
+    images = [colour_image(60 + k) for k in range(4)]
+    for k, image in enumerate(images):
+        assert cv2.imwrite(str(folder / f"{k:03d}.png"), image)
+    video = _colour_video(data / "clip.avi", images[:3])
+    (data / "linked").mkdir()  # an image that is a link: the folder is not listed
+    (data / "linked" / "a.png").symlink_to(folder / "000.png")
+    assert cv2.imwrite(str(data / "loose.png"), images[0])  # the data folder itself: not listed
+    (data / "notes").mkdir()
+    (data / "notes" / "readme.md").write_text("no images here")
+    options = CameraOptions(fps=10.0)
+    with running_app(folder, fmt="images", camera=options, data_dirs=[data]) as app:
+        wait(app)
+        # the last frame, red-green-blue, on the camera panel
+        np.testing.assert_array_equal(app.camera_image.image, images[-1][:, :, ::-1])
+        assert tuple(app.bag_dropdown.options) == ("clip.avi", "colour")
+        assert app.open_bag("clip.avi"), app.open_md.content
+        wait(app)
+        assert app.replay.format == "video" and app.replay.session.log.frames == 3
+        np.testing.assert_array_equal(app.camera_image.image, video[-1][:, :, ::-1])
+        # checked again when opened: an image turned into a link is refused
+        (folder / "001.png").unlink()
+        (folder / "001.png").symlink_to(folder / "000.png")
+        assert not app.open_bag("colour")
+        assert "not opened: colour is not a folder of images any more" in app.open_md.content

@@ -197,8 +197,8 @@ class CogmapApp:
             parameters are the sliders' initial values.
         export_dir: the folder "save HTML replay" writes into (default
             ``$COGMAP_CACHE/exports``; see :mod:`app.server.files`).
-        data_dirs: the folders whose bags "open another bag" lists (default: the bag's folder;
-            the cache's for the built-in dataset).
+        data_dirs: the folders whose bags, videos, image folders and logs "open another bag"
+            lists (default: the bag's folder; the cache's for the built-in dataset).
 
     """
 
@@ -1540,14 +1540,15 @@ class CogmapApp:
         return thread
 
     def open_bag(self, name: str) -> bool:
-        """Replay the bag or log listed as ``name`` (in the data folders); errors go to the page.
+        """Replay the input listed as ``name`` (in the data folders); errors go to the page.
 
         Only the names of :meth:`refresh_bags`' list are opened; anything else -- a path, a
-        missing file, a folder -- gets the same one line. The file is checked again (a regular
-        file inside its folder, not too large) and opened by its resolved path, then checked
-        (a bag with camera frames, or a log of odometry and place recognition read whole, as
-        ``cogmap serve FILE`` reads it) before the current replay is replaced. A bag after a
-        log (or a log after a bag) starts from its kind's default parameters.
+        missing file, a folder not listed -- gets the same one line. The file is checked again
+        (a regular file inside its folder, not too large; an image folder's images regular
+        files) and opened by its resolved path, then checked (a bag, video or image folder with
+        camera frames, or a log of odometry and place recognition read whole, as
+        ``cogmap serve FILE`` reads it) before the current replay is replaced. A camera input
+        after a log (or a log after one) starts from its kind's default parameters.
         """
         chosen = self._bags.get(name)
         if chosen is None:
@@ -1567,6 +1568,8 @@ class CogmapApp:
             chosen = self.data.check(chosen)
             if chosen.kind == "bag":
                 reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
+            elif KINDS[chosen.kind].has_camera:  # a video or image folder (serve's --fps)
+                reader = open_source(chosen.path, chosen.kind, camera=self._camera)
             else:  # a log: read (and checked) whole, as cogmap serve FILE reads it
                 reader = open_source(chosen.path, chosen.kind, log=log_options)
             frames = reader.info.frame_count
@@ -1574,6 +1577,8 @@ class CogmapApp:
                 problem = (
                     f"{name} has no camera frames on the image topic"
                     if chosen.kind == "bag"
+                    else f"{name} has no camera frames"
+                    if KINDS[chosen.kind].has_camera
                     else f"{name} has no odometry to map"
                 )
         except CogmapError as exc:
