@@ -255,8 +255,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         action="append",
         default=None,
         metavar="DIR",
-        help="a folder whose bags 'open another bag' lists (repeatable; default: the served "
-        "input's folder); visitors choose from that list only",
+        help="a folder whose bags, videos, image folders and logs 'open another bag' lists "
+        "(repeatable; default: the served input's folder); visitors choose from that list only",
     )
     token = parser.add_mutually_exclusive_group()
     token.add_argument(

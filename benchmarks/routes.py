@@ -46,7 +46,6 @@ from map_layouts import LAYOUTS, MODES, load_dataset  # noqa: E402
 from cogmap_core.cognitive_map import CognitiveMap, MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.datasets.layout import Layout, load_layout  # noqa: E402
-from cogmap_core.evaluation import RigidTransform2D  # noqa: E402
 from cogmap_core.map_graph import EdgeKind, MapSnapshot  # noqa: E402
 from cogmap_core.routes import (  # noqa: E402
     TRUE_PATH_JOIN_RADIUS,
@@ -100,13 +99,6 @@ def corners(points: np.ndarray) -> int:
     heading = np.arctan2(step[:, 1], step[:, 0])
     turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
     return int(np.count_nonzero(turn > CORNER))
-
-
-def to_map_frame(alignment: RigidTransform2D, points: np.ndarray) -> np.ndarray:
-    """The inverse of ``alignment`` (map -> truth): truth-frame points in the map's frame."""
-    c, s = np.cos(alignment.theta), np.sin(alignment.theta)
-    d = np.asarray(points, dtype=np.float64)[:, :2] - (alignment.tx, alignment.ty)
-    return np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], 1)
 
 
 def in_wall_length(layout: Layout, a: np.ndarray, b: np.ndarray, step: float = 0.005) -> np.ndarray:
@@ -212,8 +204,9 @@ def route_map(
         (min(a, b), max(a, b)): k
         for k, (a, b) in enumerate(zip(a_rows.tolist(), b_rows.tolist(), strict=True))
     }
-    start_map = to_map_frame(alignment, truth[starts])
-    goal_map = to_map_frame(alignment, truth[goals])
+    to_map = alignment.inverse()  # the truth's frame -> the map's
+    start_map = to_map.apply(truth[starts, :2])
+    goal_map = to_map.apply(truth[goals, :2])
     n = starts.shape[0]
     length = np.full(n, np.nan)
     gaps = np.zeros((n, 2))

@@ -66,6 +66,26 @@ class RigidTransform2D:
             [c * p[:, 0] - s * p[:, 1] + self.tx, s * p[:, 0] + c * p[:, 1] + self.ty], 1
         )
 
+    def inverse(self) -> RigidTransform2D:
+        """The transform undoing this one: ``p -> R(-theta) (p - t)``.
+
+        An alignment taking a map onto the ground truth, inverted, takes ground-truth points
+        (or places picked where the map is shown aligned) into the map's frame.
+        """
+        c, s = math.cos(self.theta), math.sin(self.theta)
+        return RigidTransform2D(
+            -self.theta, -(c * self.tx + s * self.ty), s * self.tx - c * self.ty
+        )
+
+    def then(self, other: RigidTransform2D) -> RigidTransform2D:
+        """The transform applying this one, then ``other`` (``other.apply(self.apply(p))``)."""
+        c, s = math.cos(other.theta), math.sin(other.theta)
+        return RigidTransform2D(
+            self.theta + other.theta,
+            c * self.tx - s * self.ty + other.tx,
+            s * self.tx + c * self.ty + other.ty,
+        )
+
 
 def align_rigid_2d(source: FloatArray, target: FloatArray) -> RigidTransform2D:
     """Least-squares rotation and translation taking ``source`` points onto ``target`` (Kabsch)."""

@@ -17,7 +17,9 @@ class Frame:
     Attributes:
         index: 0-based position of the frame in the stream (counting only frames yielded).
         time: data time in seconds since the start of the bag (the first message's stamp).
-        image: decoded grayscale image, ``uint8`` of shape ``(height, width)``.
+        image: the decoded image, ``uint8``: grey ``(height, width)``, or a colour camera's
+            ``(height, width, 3)`` (blue, green, red) when the front end's arithmetic averages
+            colour as OpenRatSLAM does (:func:`~cogmap_core.frontend.local_view.averages_colour`).
         translation: forward distance travelled since the previous frame (m), from odometry
             ``twist.linear.x`` integrated over header-stamp intervals.
         rotation: heading change since the previous frame (rad), from ``twist.angular.z``.

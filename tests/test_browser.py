@@ -3,9 +3,10 @@
 One session on a short generated bag: load the page (paused), play at max speed to the end, type
 every tuning parameter -- a valid value, one out of range, garbage -- and see the counters
 change to what ``SlamSession.rebuild`` gives (the time from Enter to the counter is printed),
-switch maps, show two side by side, click a vertex, pin the map and compare after a change, open
-a second tab with a view of its own, play and pause with the space bar, export summary.json and
-an HTML replay. Screenshots of the final states are saved as artifacts (their paths are printed).
+switch maps, show two side by side, click a vertex, ask for a route between two places (issue
+26), pin the map and compare after a change, open a second tab with a view of its own, play and
+pause with the space bar, export summary.json and an HTML replay. Screenshots of the final
+states are saved as artifacts (their paths are printed).
 
 Skipped when Chromium is not installed, unless ``COGMAP_REQUIRE_BROWSER`` is set (CI sets it):
 then a missing browser is a failure.
@@ -31,6 +32,7 @@ import pytest
 
 from app.server.params import SPECS, format_value
 from app.server.replay import PlaybackState
+from app.server.routes import ROUTE_CASING
 from app.server.scene import MAP_COLORS, PINNED_COLOR
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
@@ -319,6 +321,42 @@ def test_the_page_in_chromium(
             assert f"vertex id {snap.vertex_ids[k]}" in " ".join(inspect.inner_text().split())
             found = inspect.bounding_box()  # issue 25, item 14: on top, not below the fold
             assert found is not None and found["y"] >= 0 and found["y"] + found["height"] <= 950
+
+            # ---- issue 26: a route -- click "route", then two places on the compact map; the
+            # route is drawn (with the standard map's and the true path) and the lengths shown
+            ink_before = map_pixels(canvas.screenshot(), ROUTE_CASING, 12)
+            page.get_by_role("button", name="route", exact=True).click()
+            route_note = page.locator("#cogmap-route")
+            until(lambda: "Click the start" in route_note.inner_text(), WAIT_S, "route mode")
+            box = canvas.bounding_box()
+            assert box is not None
+            n = snap.vertex_ids.shape[0]
+            ends = snap.poses[[n // 5, 3 * n // 5], :2]
+            for k, (u, v) in enumerate(on_screen(view, ends)):
+                page.mouse.click(box["x"] + u * box["width"], box["y"] + v * box["height"])
+                until(lambda k=k: len(view.route_places) == k + 1, WAIT_S, "a route's place")
+            page.wait_for_selector("#cogmap-route-lengths", timeout=TIMEOUT_MS)
+            plan = view.route_plan
+            assert plan is not None and plan.truth is not None and plan.truth.route is not None
+            assert inspect.get_attribute("data-kind") == "vertex"  # the clicks picked nothing
+            for leg in (*plan.legs, plan.truth):
+                assert leg.route is not None
+                shown = page.locator(f"#cogmap-route-{leg.key}-length").inner_text()
+                assert shown == f"{leg.route.length:.2f} m"
+                ratio = page.locator(f"#cogmap-route-{leg.key}-ratio").inner_text()
+                assert ratio == f"{leg.route.length / plan.truth.route.length:.3f}"
+            for place, end in zip((plan.start, plan.goal), ends, strict=True):  # within 2 px
+                assert place.mode is MapMode.COMPACT and np.hypot(*(place.xy - end)) < 0.02
+            until(
+                lambda: map_pixels(canvas.screenshot(), ROUTE_CASING, 12) > ink_before + 300,
+                WAIT_S,
+                "the route drawn (its dark casing)",
+            )
+            page.screenshot(path=str(ARTIFACTS / "browser-route.png"))
+            shots.append(ARTIFACTS / "browser-route.png")
+            page.get_by_role("button", name="clear route").click()
+            until(lambda: view.route_plan is None, WAIT_S, "the route cleared")
+            until(lambda: "Click route, then" in route_note.inner_text(), WAIT_S, "the help")
 
             # ---- pin the compact map, change delta, compare
             page.get_by_role("button", name="pin the shown map").click()

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from cogmap_core.evaluation import (
+    RigidTransform2D,
     absolute_trajectory_error,
     align_rigid_2d,
     dead_reckoning,
@@ -28,6 +29,31 @@ def test_alignment_recovers_a_rigid_motion_exactly():
     assert tf.theta == pytest.approx(theta)
     assert (tf.tx, tf.ty) == (pytest.approx(1.5), pytest.approx(-2.0))
     assert absolute_trajectory_error(pts, moved) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_inverse_and_then_undo_and_chain_transforms():
+    # a quarter turn then (1, 2): (1, 0) -> (1, 3); the inverse takes it back exactly
+    quarter = RigidTransform2D(np.pi / 2, 1.0, 2.0)
+    np.testing.assert_allclose(quarter.apply(np.array([[1.0, 0.0]])), [[1.0, 3.0]], atol=1e-15)
+    back = quarter.inverse()
+    assert back.theta == -np.pi / 2
+    assert (back.tx, back.ty) == (pytest.approx(-2.0), pytest.approx(1.0))
+    np.testing.assert_allclose(back.apply(np.array([[1.0, 3.0]])), [[1.0, 0.0]], atol=1e-15)
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(50, 2)) * 10
+    for theta, tx, ty in rng.normal(size=(20, 3)) * [3.0, 5.0, 5.0]:
+        tf = RigidTransform2D(float(theta), float(tx), float(ty))
+        np.testing.assert_allclose(tf.inverse().apply(tf.apply(pts)), pts, atol=1e-12)
+        np.testing.assert_allclose(tf.apply(tf.inverse().apply(pts)), pts, atol=1e-12)
+        other = RigidTransform2D(0.4, -1.0, 0.5)
+        np.testing.assert_allclose(
+            tf.then(other).apply(pts), other.apply(tf.apply(pts)), atol=1e-12
+        )
+    # an alignment found by align_rigid_2d, inverted, takes the truth into the map's frame
+    theta, t = 0.7, np.array([1.5, -2.0])
+    c, s = np.cos(theta), np.sin(theta)
+    moved = pts @ np.array([[c, s], [-s, c]]) + t
+    np.testing.assert_allclose(align_rigid_2d(pts, moved).inverse().apply(moved), pts, atol=1e-9)
 
 
 def test_ate_is_rmse_after_alignment():

@@ -79,8 +79,8 @@ def test_exact_block_images_give_the_block_template() -> None:
 
 def test_bad_images_are_rejected() -> None:
     lv = LocalViewCells(WHOLE)
-    with pytest.raises(InputFileError):
-        lv.make_template(np.zeros((240, 416, 3), dtype=np.uint8))
+    with pytest.raises(InputFileError):  # (a colour image has three channels: see below)
+        lv.make_template(np.zeros((240, 416, 4), dtype=np.uint8))
     with pytest.raises(InputFileError):
         lv.make_template(np.zeros((240, 416), dtype=np.float32))  # type: ignore[arg-type]
     with pytest.raises(InputFileError):

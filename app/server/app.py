@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import viser
 import viser.uplot
+from numpy.typing import NDArray
 
 from app.server.assets import head_html, help_markdown
 from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, x_end, y_top
@@ -70,6 +71,7 @@ from app.server.params import (
 )
 from app.server.rebuild import make_builder
 from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
+from app.server.routes import RouteWorker, TruthGraphs, plan_routes, route_inputs, route_problem
 from app.server.scene import MapExtras, SceneStreamer, cluster_color
 from app.server.validation import (
     Adjusted,
@@ -140,6 +142,16 @@ def _log_refusal(note: Refusal | Adjustment) -> None:
     log.warning("GUI value from a client %s", note.message)
 
 
+def camera_rgb(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The camera panel's picture of a frame's image: red, green, blue ``(h, w, 3)``.
+
+    A grey image in its three channels; a colour one (blue, green, red, as a colour camera's
+    frames are in OpenRatSLAM's arithmetic) in its own colours.
+    """
+    rgb = image[:, :, ::-1] if image.ndim == 3 else np.repeat(image[:, :, None], 3, axis=2)
+    return np.ascontiguousarray(rgb)
+
+
 class _RateLimit:
     def __init__(self, hz: float) -> None:
         self.period = 1.0 / hz if hz > 0 else 0.0
@@ -185,8 +197,8 @@ class CogmapApp:
             parameters are the sliders' initial values.
         export_dir: the folder "save HTML replay" writes into (default
             ``$COGMAP_CACHE/exports``; see :mod:`app.server.files`).
-        data_dirs: the folders whose bags "open another bag" lists (default: the bag's folder;
-            the cache's for the built-in dataset).
+        data_dirs: the folders whose bags, videos, image folders and logs "open another bag"
+            lists (default: the bag's folder; the cache's for the built-in dataset).
 
     """
 
@@ -270,6 +282,9 @@ class CogmapApp:
         self._figures_stop = False
         self._figures_busy = False
         threading.Thread(target=self._figures_loop, name="cogmap-figures", daemon=True).start()
+        # routes (issue 26): a view's callbacks flag it, this worker computes and draws
+        self._truth_graphs = TruthGraphs()
+        self.routes: RouteWorker[ClientView] = RouteWorker(self._route_work)
         self.started_at = time.monotonic()
         self.replay = self._make_replay(
             bag, params, speed, autoplay and not wait_for_viewer, fmt=fmt, log=log, resume=resume
@@ -331,7 +346,7 @@ class CogmapApp:
         while time.monotonic() < deadline:
             with self._figures_cond:
                 done = not self._figures_todo and not self._figures_busy
-            if done:
+            if done and self.routes.idle():
                 return True
             time.sleep(0.01)
         return False
@@ -339,6 +354,7 @@ class CogmapApp:
     def stop(self) -> None:
         """Stop the replay worker (the server is stopped by its owner)."""
         self.replay.stop()
+        self.routes.stop()
         with self._figures_cond:
             self._figures_stop = True
             self._figures_cond.notify()
@@ -361,6 +377,7 @@ class CogmapApp:
 
         # what a click picked comes first: it shows next to the map, never below the fold
         self.inspect_folder = gui.add_folder("Inspect — yours")
+        self.route_folder = gui.add_folder("Route — yours")
         self.view_folder = gui.add_folder("View — yours")
         self.compare_folder = gui.add_folder("Compare with a pinned map — yours")
 
@@ -835,7 +852,7 @@ class CogmapApp:
         for handle in (self.camera_image, self.template_image):
             if not handle.visible:  # (hidden while a log was replayed)
                 handle.visible = True
-        self.camera_image.image = np.repeat(frame.image[:, :, None], 3, axis=2)  # RGB
+        self.camera_image.image = camera_rgb(frame.image)
         template = "–" if view_template is None else f"#{view_template}"
         self.template_md.content = (
             f"view template **{template}** · frame {index + 1} / {r.total_frames} · "
@@ -1032,6 +1049,45 @@ class CogmapApp:
             self._publish_scene()  # the truth's alignment, the false loop closures
             self._update_counters()
         self._refresh_views()
+
+    def _route_work(self, view: ClientView) -> None:
+        """Find and draw the routes of ``view``'s two places (on the route worker's thread).
+
+        The maps, the alignments the scene shows and the true path so far are copied under the
+        replay's lock; the routes are computed without it (:mod:`app.server.routes`).
+        """
+        if view.closed:
+            return
+        places = view.route_places
+        if len(places) < 2:
+            return
+        modes = view.route_modes()
+        with self.replay.lock:
+            maps = self.replay.session.maps
+            snapshots = {mode: maps[mode].snapshot() for mode in modes}
+            transforms = {
+                mode: None if (f := self._figures.get(mode)) is None else f.truth_transform
+                for mode in modes
+            }
+            log_ = self.replay.session.log
+            truth = None
+            key: tuple[int, ...] = ()
+            if log_.has_ground_truth():
+                count = min(self.replay.cursor, len(log_.ground_truth))
+                truth = np.array(log_.ground_truth[:count, :2])
+                key = (id(log_), count)
+        try:
+            inputs = route_inputs(snapshots, transforms, truth, key)
+            graph = None
+            if inputs.truth is not None:
+                graph = self._truth_graphs.get(inputs.truth, inputs.truth_key)
+            plan = plan_routes(inputs, places[0], places[1], modes, graph)
+        except Exception as exc:
+            if not isinstance(exc, CogmapError):
+                traceback.print_exc()
+            view.route_failed(places, self.scrubber.scrub(route_problem(exc)))
+            return
+        view.show_route(plan)
 
     def _dead_reckoning(self) -> np.ndarray:
         log_ = self.replay.session.log
@@ -1484,14 +1540,15 @@ class CogmapApp:
         return thread
 
     def open_bag(self, name: str) -> bool:
-        """Replay the bag or log listed as ``name`` (in the data folders); errors go to the page.
+        """Replay the input listed as ``name`` (in the data folders); errors go to the page.
 
         Only the names of :meth:`refresh_bags`' list are opened; anything else -- a path, a
-        missing file, a folder -- gets the same one line. The file is checked again (a regular
-        file inside its folder, not too large) and opened by its resolved path, then checked
-        (a bag with camera frames, or a log of odometry and place recognition read whole, as
-        ``cogmap serve FILE`` reads it) before the current replay is replaced. A bag after a
-        log (or a log after a bag) starts from its kind's default parameters.
+        missing file, a folder not listed -- gets the same one line. The file is checked again
+        (a regular file inside its folder, not too large; an image folder's images regular
+        files) and opened by its resolved path, then checked (a bag, video or image folder with
+        camera frames, or a log of odometry and place recognition read whole, as
+        ``cogmap serve FILE`` reads it) before the current replay is replaced. A camera input
+        after a log (or a log after one) starts from its kind's default parameters.
         """
         chosen = self._bags.get(name)
         if chosen is None:
@@ -1511,6 +1568,8 @@ class CogmapApp:
             chosen = self.data.check(chosen)
             if chosen.kind == "bag":
                 reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
+            elif KINDS[chosen.kind].has_camera:  # a video or image folder (serve's --fps)
+                reader = open_source(chosen.path, chosen.kind, camera=self._camera)
             else:  # a log: read (and checked) whole, as cogmap serve FILE reads it
                 reader = open_source(chosen.path, chosen.kind, log=log_options)
             frames = reader.info.frame_count
@@ -1518,6 +1577,8 @@ class CogmapApp:
                 problem = (
                     f"{name} has no camera frames on the image topic"
                     if chosen.kind == "bag"
+                    else f"{name} has no camera frames"
+                    if KINDS[chosen.kind].has_camera
                     else f"{name} has no odometry to map"
                 )
         except CogmapError as exc:
@@ -1557,6 +1618,7 @@ class CogmapApp:
             self.replay.start()
         for view in list(self.views.values()):  # what a tab picked was the old input's
             view.select(None)
+            view.clear_route()
         if switched:
             self.reset_button.label = self._reset_label()
             self.reset_params()  # the sliders show the kind's defaults (no rebuild: in use)

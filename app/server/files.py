@@ -14,10 +14,14 @@ never listed, nor opened), with a bag's suffix or a ROS 1 bag's first bytes, or 
 odometry and place recognition as ``cogmap serve FILE`` takes them -- a ``.txt`` file whose
 first data line is a TUC input line (``odom2`` or ``loop``; not its ground truth), an
 ``*_odometry.csv`` file of CSV rows (its loops and ground truth are found beside it), the first
-:data:`HEAD_BYTES` read -- up to :data:`MAX_DEPTH` folders deep; a symbolic link is
-followed only to a regular file inside the same data folder. A choice is checked again when it
-is opened (still a regular file inside the folder, at most :data:`MAX_BAG_BYTES`), and the file
-is then opened by its resolved path. Whatever is not in the list -- a path that does not exist,
+:data:`HEAD_BYTES` read -- or camera-only inputs: a video (its suffix one of
+:data:`~cogmap_core.datasets.video_reader.VIDEO_SUFFIXES`), a folder below a data folder that
+holds images (:data:`~cogmap_core.datasets.image_folder.IMAGE_SUFFIXES`), all of them regular
+files (a folder with a linked image is not listed) -- up to :data:`MAX_DEPTH` folders deep; a
+symbolic link is followed only to a regular file inside the same data folder. A choice is
+checked again when it is opened (still a regular file inside the folder, at most
+:data:`MAX_BAG_BYTES`; an image folder still a folder of such images), and it is then opened by
+its resolved path. Whatever is not in the list -- a path that does not exist,
 one outside the folders, a folder -- gets the same answer, and messages shown on the page name
 files relative to their data folder (:meth:`Scrubber.scrub`), never by an absolute path.
 """
@@ -32,8 +36,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cogmap_core.datasets.cache import cache_dir
+from cogmap_core.datasets.image_folder import IMAGE_SUFFIXES
 from cogmap_core.datasets.odometry_csv import looks_like_csv
 from cogmap_core.datasets.tuc import INPUT_FIELDS
+from cogmap_core.datasets.video_reader import VIDEO_SUFFIXES
 from cogmap_core.errors import InputFileError, OutputError
 from cogmap_core.fileio import check_writable, output_error
 from cogmap_core.sources.log_text import BOM
@@ -159,12 +165,12 @@ class ExportFolder:
 
 @dataclass(frozen=True, slots=True)
 class DataFile:
-    """A bag or log the page may open: its ``name`` on the page, where it is, its kind."""
+    """An input the page may open: its ``name`` on the page, where it is, its kind."""
 
     name: str
     path: Path
     folder: Path  # the data folder's real path
-    kind: str = "bag"  # bag, tuc or csv (cogmap_core.sources.detect.KINDS)
+    kind: str = "bag"  # bag, video, images, tuc or csv (cogmap_core.sources.detect.KINDS)
 
 
 class DataFolders:
@@ -202,6 +208,8 @@ class DataFolders:
     def check(self, chosen: DataFile) -> DataFile:
         """``chosen`` again, as it is now: a regular file inside its folder, not too large.
 
+        An image folder: a folder inside it still, of images that are regular files.
+
         Raises:
             InputFileError: it is not (any more); the message names it as the page does.
 
@@ -209,6 +217,15 @@ class DataFolders:
         real = Path(os.path.realpath(chosen.path))
         if not _inside(real, chosen.folder):
             raise InputFileError(f"{chosen.name} is no longer inside its data folder")
+        if chosen.kind == "images":
+            try:
+                with os.scandir(real) as scan:
+                    images = _holds_images(list(scan))
+            except OSError:
+                images = False
+            if not images:
+                raise InputFileError(f"{chosen.name} is not a folder of images any more")
+            return DataFile(chosen.name, real, chosen.folder, chosen.kind)
         try:
             info = os.stat(real)
         except OSError:
@@ -270,12 +287,14 @@ def _inside(path: Path, folder: Path) -> bool:
 def _walk(
     root: Path, folder: Path, depth: int, budget: list[int]
 ) -> Iterator[tuple[str, Path, str]]:
-    """``(relative name, real path, kind)`` of the bags and logs below ``folder`` (module doc)."""
+    """``(relative name, real path, kind)`` of the inputs below ``folder`` (module doc)."""
     try:
         with os.scandir(folder) as scan:
             entries = sorted(scan, key=lambda e: e.name)
     except OSError:
         return
+    if depth > 0 and _holds_images(entries):
+        yield str(folder.relative_to(root)), folder, "images"
     for entry in entries:
         budget[0] -= 1
         if budget[0] < 0:
@@ -298,12 +317,27 @@ def _walk(
                 continue  # a FIFO, a device, a socket: never listed, never opened
         except OSError:
             continue
+        if real.suffix.lower() in IMAGE_SUFFIXES:
+            continue  # (their folder is listed)
         if real.suffix.lower() in BAG_SUFFIXES or _is_ros1_bag(real):
             yield str(path.relative_to(root)), real, "bag"
+        elif real.suffix.lower() in VIDEO_SUFFIXES:
+            yield str(path.relative_to(root)), real, "video"
         else:
             kind = _log_kind(real)
             if kind is not None:
                 yield str(path.relative_to(root)), real, kind
+
+
+def _holds_images(entries: Sequence[os.DirEntry[str]]) -> bool:
+    """Whether a folder's ``entries`` hold an image, every image a regular file (no link)."""
+    images = [e for e in entries if Path(e.name).suffix.lower() in IMAGE_SUFFIXES]
+    try:
+        return bool(images) and all(
+            not e.is_symlink() and e.is_file(follow_symlinks=False) for e in images
+        )
+    except OSError:
+        return False
 
 
 def _log_kind(path: Path) -> str | None:

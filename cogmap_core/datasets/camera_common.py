@@ -182,8 +182,9 @@ def frame_times(
 class CameraReader:
     """Base of the camera-only readers: frames with visual odometry and ground truth.
 
-    Subclasses set :attr:`info` and implement :meth:`_images` (the decoded grayscale images in
-    order, ``None`` for one that does not decode).
+    Subclasses set :attr:`info` and implement :meth:`_images` (the decoded images in order, grey
+    or blue-green-red as :class:`~cogmap_core.frames.Frame` has them, ``None`` for one that does
+    not decode).
     """
 
     info: CameraInfo
@@ -255,9 +256,9 @@ class CameraReader:
                 counters.first_seen.setdefault("undecodable_images", t)
                 continue
             decoded += 1
-            if shape is None:
-                shape = image.shape
-            elif image.shape != shape:
+            if shape is None:  # (height, width): grey and colour images may mix
+                shape = image.shape[:2]
+            elif image.shape[:2] != shape:
                 counters.image_size_changes += 1
                 counters.first_seen.setdefault("image_size_changes", t)
                 continue

@@ -2,7 +2,8 @@
 
 :func:`open_image_folder` lists the images (:data:`IMAGE_SUFFIXES`, sorted by name) and reads the
 first; :meth:`ImageFolderReader.frames` then streams :class:`~cogmap_core.frames.Frame` objects
-as the bag reader does: the image in grayscale, its motion from RatSLAM's visual odometry, the
+as the bag reader does: the image (grey, or in colour when it is and the front end averages
+colour, as a bag's), its motion from RatSLAM's visual odometry, the
 ground truth of ``groundtruth.txt``. Frame times come from ``times.txt`` (one per image), else
 ``--fps`` (:mod:`.camera_common`; the files may also be named ``NAME.times.txt`` and
 ``NAME.groundtruth.txt`` beside the folder). An image that does not decode, or of another size
@@ -28,9 +29,10 @@ from cogmap_core.datasets.camera_common import (
     frame_times,
     read_ground_truth,
 )
-from cogmap_core.datasets.jpeg import MAX_IMAGE_PIXELS, image_size
+from cogmap_core.datasets.jpeg import MAX_IMAGE_PIXELS, image_header
 from cogmap_core.errors import InputFileError
 from cogmap_core.frontend.config import FrontEndConfig
+from cogmap_core.frontend.local_view import averages_colour
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
 
@@ -72,7 +74,8 @@ class ImageFolderReader(CameraReader):
         gt_path = _inside_or_beside(folder, "groundtruth.txt")
         truth = read_ground_truth(gt_path) if gt_path.exists() else None
         super().__init__(folder, times, truth, frontend)
-        first = next((im for im in map(_read, self.files[:50]) if im is not None), None)
+        self.colour = averages_colour(frontend)
+        first = next((im for im in map(self._read, self.files[:50]) if im is not None), None)
         if first is None:
             raise InputFileError(f"{folder}: its first images do not decode; check the folder")
         self.info = CameraInfo(
@@ -87,21 +90,36 @@ class ImageFolderReader(CameraReader):
 
     def _images(self) -> Iterator[NDArray[np.uint8] | None]:
         for path in self.files:
-            yield _read(path)
+            yield self._read(path)
+
+    def _read(self, path: Path) -> NDArray[np.uint8] | None:
+        return read_image(path, self.colour)
 
 
-def _read(path: Path) -> NDArray[np.uint8] | None:
-    """The image in grayscale, or None when it does not decode."""
+def read_image(path: Path, colour: bool = False) -> NDArray[np.uint8] | None:
+    """The image at ``path``, or None when it does not decode.
+
+    Grey ``(h, w)``; a colour image is ``(h, w, 3)``, blue, green, red, when ``colour``, else
+    its luma. The file says which it is, never its pixels: a JPEG's or PNG's header
+    (:func:`~cogmap_core.datasets.jpeg.image_header`), another format's own decoder
+    (``cv2.IMREAD_ANYCOLOR``: a grey BMP, PGM or TIFF stays grey, a colour one that happens to
+    be black is still in colour).
+    """
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError:
         return None
     if data.size == 0:
         return None
-    size = image_size(data)
-    if size is not None and size[0] * size[1] > MAX_IMAGE_PIXELS:
+    header = image_header(data)
+    if header is not None and header[0] * header[1] > MAX_IMAGE_PIXELS:
         return None  # refused from its header, never allocated (as in bags)
-    image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    flag = cv2.IMREAD_GRAYSCALE
+    if colour and header is None:
+        flag = cv2.IMREAD_ANYCOLOR
+    elif colour and header is not None and header[2] == 3:
+        flag = cv2.IMREAD_COLOR
+    image = cv2.imdecode(data, flag)
     return image if image is not None and image.size else None
 
 

@@ -19,6 +19,11 @@ frame header, SOF; a PNG's IHDR chunk) by :func:`image_size`: an image of more t
 4 kB JPEG can declare 65000 x 65000 pixels, which libjpeg would spend gigabytes and most of a
 minute on), and data that is neither JPEG nor PNG is not handed to OpenCV (which would also
 decode TIFF, WebP, OpenEXR, ... with their own decoders) but reported undecodable.
+
+Colour. The same header says whether the image is in colour (a JPEG of three components, a PNG
+of colour type RGB, RGBA or palette: :func:`image_header`). A decoder given a ``colour_flag``
+decodes colour images with it (``cv2.IMREAD_COLOR``: blue, green, red, as OpenRatSLAM receives a
+``bgr8`` image) and grey ones with its ``flag``, so a grey camera costs nothing more.
 """
 
 from __future__ import annotations
@@ -74,12 +79,24 @@ def image_size(data: bytes | NDArray[np.uint8]) -> tuple[int, int] | None:
     length is skipped, never its content), or the PNG's IHDR chunk. A JPEG whose frame header
     gives height 0 (the height follows in a DNL marker, which no camera writes) has no size here.
     """
+    header = image_header(data)
+    return None if header is None else (header[0], header[1])
+
+
+def image_header(data: bytes | NDArray[np.uint8]) -> tuple[int, int, int] | None:
+    """``(width, height, channels)`` declared by a JPEG or PNG header, or None (see image_size).
+
+    ``channels`` is 3 for a colour image (a JPEG of three components; a PNG of colour type RGB,
+    RGBA or palette, decoded as blue, green, red), 1 for a grey one (a JPEG of one component, a
+    grey PNG with or without alpha), and the JPEG's component count otherwise (4: CMYK).
+    """
     buf = memoryview(data).cast("B") if not isinstance(data, bytes) else memoryview(data)
     n = len(buf)
-    if n >= 24 and bytes(buf[:8]) == _PNG_SIGNATURE and bytes(buf[12:16]) == b"IHDR":
+    if n >= 26 and bytes(buf[:8]) == _PNG_SIGNATURE and bytes(buf[12:16]) == b"IHDR":
         width = int.from_bytes(buf[16:20], "big")
         height = int.from_bytes(buf[20:24], "big")
-        return (width, height) if width and height else None
+        channels = 3 if buf[25] in (2, 3, 6) else 1
+        return (width, height, channels) if width and height else None
     if n < 4 or bytes(buf[:2]) != _JPEG_SOI:
         return None
     pos = 2
@@ -99,11 +116,12 @@ def image_size(data: bytes | NDArray[np.uint8]) -> tuple[int, int] | None:
         if length < 2:
             return None
         if marker in _SOF_MARKERS:
-            if pos + 9 > n or length < 7:
+            if pos + 10 > n or length < 8:
                 return None
             height = int.from_bytes(buf[pos + 5 : pos + 7], "big")
             width = int.from_bytes(buf[pos + 7 : pos + 9], "big")
-            return (width, height) if width and height else None
+            components = int(buf[pos + 9])
+            return (width, height, components) if width and height else None
         pos += 2 + length
     return None
 
@@ -113,12 +131,16 @@ class JpegDecoder:
 
     Args:
         flag: the ``cv2.IMREAD_*`` flag (e.g. ``cv2.IMREAD_REDUCED_GRAYSCALE_4``).
+        colour_flag: the flag for images whose header says they are in colour (e.g.
+            ``cv2.IMREAD_COLOR``: a ``(height, width, 3)`` image, blue, green, red); None
+            decodes every image with ``flag``.
 
     """
 
-    def __init__(self, flag: int) -> None:
+    def __init__(self, flag: int, colour_flag: int | None = None) -> None:
         """Open the private pipe (decoding without the check if that fails)."""
         self.flag = flag
+        self.colour_flag = colour_flag
         self._read_fd: int | None = None
         self._write_fd: int | None = None
         try:
@@ -147,22 +169,26 @@ class JpegDecoder:
             ImageTooLarge: the header declares more than :data:`MAX_IMAGE_PIXELS` pixels.
 
         """
-        size = image_size(data)
-        if size is None:
+        header = image_header(data)
+        if header is None:
             return None, None
-        if size[0] * size[1] > MAX_IMAGE_PIXELS:
-            raise ImageTooLarge(*size)
+        width, height, channels = header
+        if width * height > MAX_IMAGE_PIXELS:
+            raise ImageTooLarge(width, height)
+        flag = self.flag
+        if self.colour_flag is not None and channels == 3:
+            flag = self.colour_flag
         if self._write_fd is None:
-            return cv2.imdecode(data, self.flag), None
+            return cv2.imdecode(data, flag), None
         with _FD2_LOCK:
             try:
                 saved = os.dup(2)
             except OSError:  # no standard error to redirect
-                return cv2.imdecode(data, self.flag), None
+                return cv2.imdecode(data, flag), None
             try:
                 os.dup2(self._write_fd, 2)
                 try:
-                    image = cv2.imdecode(data, self.flag)
+                    image = cv2.imdecode(data, flag)
                 finally:
                     os.dup2(saved, 2)
             finally:

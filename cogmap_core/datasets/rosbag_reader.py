@@ -1,8 +1,12 @@
 """Streaming reader for iRat-layout bags (ROS1, and ROS2 where rosbags can), pure rosbags.
 
 :func:`open_bag` checks the bag and its topics; :meth:`BagReader.frames` then streams
-:class:`~cogmap_core.frames.Frame` objects in time order: the decoded grayscale camera image, the
+:class:`~cogmap_core.frames.Frame` objects in time order: the decoded camera image, the
 odometry integrated since the previous frame and the ground-truth pose at the frame's time.
+The image is grey, or in colour (blue, green, red) when the JPEG is and the front end's
+arithmetic averages colour as OpenRatSLAM does
+(:func:`~cogmap_core.frontend.local_view.averages_colour`: its default); a grey JPEG is
+always decoded grey, and so is a colour one with ``vt_whole_crop = 1`` (its luma).
 
 Conventions (those of OpenRatSLAM):
 
@@ -81,6 +85,7 @@ from cogmap_core.datasets.topics import (
 from cogmap_core.errors import ParameterError
 from cogmap_core.frames import Frame
 from cogmap_core.frontend.config import FrontEndConfig
+from cogmap_core.frontend.local_view import averages_colour
 from cogmap_core.frontend.visual_odometry import with_visual_odometry
 
 log = logging.getLogger(__name__)
@@ -97,6 +102,13 @@ _DECODE_FLAGS = {
     2: cv2.IMREAD_REDUCED_GRAYSCALE_2,
     4: cv2.IMREAD_REDUCED_GRAYSCALE_4,
     8: cv2.IMREAD_REDUCED_GRAYSCALE_8,
+}
+#: Colour JPEGs when the front end averages colour (blue, green, red, as ``bgr8``).
+_COLOUR_FLAGS = {
+    1: cv2.IMREAD_COLOR,
+    2: cv2.IMREAD_REDUCED_COLOR_2,
+    4: cv2.IMREAD_REDUCED_COLOR_4,
+    8: cv2.IMREAD_REDUCED_COLOR_8,
 }
 _ROS1_MAGIC = b"#ROSBAG V2.0\n"
 _GT_INTERPOLATION_GAP = 1.0  # s
@@ -380,6 +392,8 @@ class BagReader:
             )
         self.odometry = odometry
         self.frontend = frontend
+        #: whether colour JPEGs are decoded in colour (the front end averages blue, green, red)
+        self.colour = averages_colour(frontend)
         #: whether the frames' motion comes from the camera (decided when the bag is checked)
         self.visual_odometry = odometry == "visual"
         self._tmpdir: Path | None = None
@@ -639,7 +653,8 @@ class BagReader:
         image_topic, odom_topic = topics.image, topics.odometry
         gt_topic = topics.ground_truth if self._gt_type else None
         gt_type = self._gt_type or ""
-        decoder = JpegDecoder(_DECODE_FLAGS[self.image_scale])
+        colour_flag = _COLOUR_FLAGS[self.image_scale] if self.colour else None
+        decoder = JpegDecoder(_DECODE_FLAGS[self.image_scale], colour_flag)
         t0 = self._t0_ns
         max_gap_ns = int(self.max_odometry_gap * 1e9)
         start_ns = t0 + int(start_time * 1e9)
@@ -757,9 +772,9 @@ class BagReader:
                     if damage is not None:
                         counters.note("corrupt_images", now)
                         continue
-                    if shape is None:
-                        shape = image.shape
-                    elif image.shape != shape:
+                    if shape is None:  # (height, width): grey and colour frames may mix
+                        shape = image.shape[:2]
+                    elif image.shape[:2] != shape:
                         counters.note("image_size_changes", now)
                         continue
                     last_image_ns = stamp
@@ -869,7 +884,9 @@ def open_bag(
             ``"stop"``: the pass ends there, keeping the frames read so far (counted).
         odometry: ``"wheel"`` (the odometry topic, required), ``"visual"`` (the camera's) or
             ``"auto"`` (the topic when the bag has it, else the camera's).
-        frontend: the visual odometry's settings (default: the iRat defaults).
+        frontend: the front end's settings the frames are for: the visual odometry's, and
+            whether colour JPEGs are decoded in colour (OpenRatSLAM's arithmetic, the default)
+            or as their luma (``vt_whole_crop = 1``). Default: the iRat defaults.
 
     Raises:
         BagError: missing file, not a bag, truncated / unindexed / corrupt bag.

@@ -2,9 +2,11 @@
 
 :func:`open_video` checks the file (it opens and holds frames) and reads its frame count and
 rate; :meth:`VideoReader.frames` then streams :class:`~cogmap_core.frames.Frame` objects: the
-frame converted to grayscale, its motion from RatSLAM's visual odometry, the ground truth of a
-``NAME.groundtruth.txt`` beside it. Frame times come from ``NAME.times.txt`` beside it, else
-``--fps``, else the video's own rate (:mod:`.camera_common`).
+frame as OpenCV gives it (blue, green, red) when the front end averages colour
+(:func:`~cogmap_core.frontend.local_view.averages_colour`), else converted to its luma; its
+motion from RatSLAM's visual odometry; the ground truth of a ``NAME.groundtruth.txt`` beside it.
+Frame times come from ``NAME.times.txt`` beside it, else ``--fps``, else the video's own rate
+(:mod:`.camera_common`).
 
 Errors (one line each): a missing file, a file OpenCV cannot read as a video, a video without
 frames, no frame times.
@@ -28,14 +30,9 @@ from cogmap_core.datasets.camera_common import (
 )
 from cogmap_core.errors import InputFileError
 from cogmap_core.frontend.config import FrontEndConfig
+from cogmap_core.frontend.local_view import averages_colour, grey_image
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv")
-
-
-def _gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    if image.ndim == 3:
-        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-    return image
 
 
 class VideoReader(CameraReader):
@@ -85,13 +82,14 @@ class VideoReader(CameraReader):
         )
 
     def _images(self) -> Iterator[NDArray[np.uint8] | None]:
+        colour = averages_colour(self.frontend)
         capture = cv2.VideoCapture(str(self.path))
         try:
             while True:
                 ok, image = capture.read()
                 if not ok or image is None:
                     return
-                yield _gray(image)
+                yield image if colour else grey_image(image)
         finally:
             capture.release()
 

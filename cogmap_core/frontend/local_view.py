@@ -12,6 +12,14 @@ rows 0-139). Values are kept in steps of 2^-20 (:data:`VALUE_SCALE`), so the int
 are OpenRatSLAM's double-precision errors to within 5e-7. With ``vt_whole_crop = 1`` the whole
 crop is area-averaged (any decoded size) and rounded to 8 bits, cogmap's former choice.
 
+Colour (:func:`averages_colour`). OpenRatSLAM is fed a colour camera's images as ``bgr8`` and
+averages each pixel's blue, green and red (``convert_view_to_view_template``: a block's sum of
+``B + G + R``, divided by ``255 * 3`` and by the block's pixels). In its arithmetic, a colour
+image ``(height, width, 3)`` (blue, green, red) is turned into a template the same way, with
+the same integer sums and the same two divisions; a grey image as before (the two agree on a
+grey image given as three equal channels, to the bit). With ``vt_whole_crop = 1`` a colour image
+is converted to its luma first (``cv2.COLOR_BGR2GRAY``), cogmap's former choice.
+
 Matching. The central ``X - 2 s`` columns of the view are compared with columns
 ``o .. o + X - 2 s`` of the template for the offsets ``o = 0, step, ..., 2 s``. The best
 (template, offset) pair is a match when its MAD is at most the threshold; otherwise the view
@@ -67,6 +75,33 @@ _INITIAL_CAPACITY = 256
 VALUE_SCALE = 2**20
 _MEAN_EPSILON = 0.005  # OpenRatSLAM's margin of the mean test (local_view_match.cpp)
 _LEVEL2_MIN = 24  # pairs left after level 1 below which level 2 is skipped
+
+
+def averages_colour(config: FrontEndConfig | None) -> bool:
+    """Whether colour images keep their colour for ``config`` (None: the defaults).
+
+    True in OpenRatSLAM's arithmetic (``vt_whole_crop = 0``, the default): templates and visual
+    odometry average blue, green and red as OpenRatSLAM does; False with ``vt_whole_crop = 1``,
+    where readers decode colour images to their luma. Readers decode a colour image in colour
+    only when this is True (a grey camera costs nothing more either way).
+    """
+    return config is None or not config.vt_whole_crop
+
+
+def grey_image(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """A ``(height, width, 3)`` blue-green-red image as its luma; a grey image as it is."""
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+
+
+def check_camera_image(image: object) -> None:
+    """Refuse what is neither a grey ``(h, w)`` nor a colour ``(h, w, 3)`` ``uint8`` image."""
+    ok = isinstance(image, np.ndarray) and image.dtype == np.uint8
+    ok = ok and (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3))  # type: ignore[union-attr]
+    if not ok:
+        raise InputFileError(
+            "camera image must be a 2-D (grey) or 3-channel (blue, green, red) uint8 array, "
+            f"got {getattr(image, 'dtype', None)} of shape {getattr(image, 'shape', None)}"
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -210,7 +245,10 @@ class LocalViewCells:
         return self._templates[template_id].astype(np.int32 if self._blocks else np.uint8)
 
     def make_template(self, image: NDArray[np.uint8]) -> NDArray[Any]:
-        """Turn a grayscale camera image into a template (as :meth:`template` returns them).
+        """Turn a camera image into a template (as :meth:`template` returns them).
+
+        ``image``: grey ``(height, width)``, or colour ``(height, width, 3)`` (blue, green, red;
+        averaged as OpenRatSLAM averages a ``bgr8`` image, module doc).
 
         The crop is given in pixels of the reference image size and applied at the same
         fractions of the actual image. OpenRatSLAM's arithmetic (``vt_whole_crop = 0``): block
@@ -221,11 +259,9 @@ class LocalViewCells:
         here through the integral image, which is several times faster for non-integer scale
         factors), then optionally normalised, in 8 bits.
         """
-        if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype != np.uint8:
-            raise InputFileError(
-                f"camera image must be a 2-D uint8 array, got {getattr(image, 'dtype', None)} "
-                f"of shape {getattr(image, 'shape', None)}"
-            )
+        check_camera_image(image)
+        if not self._blocks:
+            image = grey_image(image)  # cogmap's whole crop: the luma of a colour image
         plan = self._plans.get(image.shape)
         if plan is None:
             kind = _BlockPlan if self._blocks else _AreaPlan
@@ -490,9 +526,16 @@ class _BlockPlan:
         """Block means in [0, 1]: ``sum / 255 / pixels`` as OpenRatSLAM divides.
 
         The block sums are exact integers, from the integral image (OpenCV's, in float64: exact
-        up to 2^53).
+        up to 2^53). A colour image's blocks sum blue, green and red, divided by ``255 * 3``
+        then by the pixels (OpenRatSLAM's ``bgr8`` branch): each block's ``bx * 3`` bytes of a
+        row summed at once (``cv2.reduce``, in 32-bit integers), then its ``by`` rows.
         """
         crop = image[self.rows, self.cols]
+        if crop.ndim == 3:
+            rows = crop.reshape(self.by * self.out_y * self.out_x, self.bx * 3)
+            per_row = cv2.reduce(rows, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S)
+            sums = per_row.reshape(self.out_y, self.by, self.out_x).sum(axis=1, dtype=np.int64)
+            return sums.astype(np.float64) / 765.0 / self.divisor
         corners = cv2.integral(crop, sdepth=cv2.CV_64F).take(self.ys, axis=0).take(self.xs, axis=1)
         sums = corners[1:, 1:] - corners[:-1, 1:] - corners[1:, :-1] + corners[:-1, :-1]
         return sums / 255.0 / self.divisor

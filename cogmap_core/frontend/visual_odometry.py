@@ -3,7 +3,9 @@
 As OpenRatSLAM's ``VisualOdometry`` (``visual_odometry.cpp``), per frame:
 
 1. two image strips (``vtrans_image_*`` and ``vrot_image_*``, given in reference pixels like the
-   template crop) become intensity profiles: each column's mean, divided by 255;
+   template crop) become intensity profiles: each column's mean, divided by 255 (a colour
+   image's in OpenRatSLAM's arithmetic: the column's sum of blue, green and red, divided by
+   ``255 * 3`` and by its rows, as its ``bgr8`` branch; with ``vt_whole_crop = 1`` its luma);
 2. each profile is compared with the previous frame's at shifts of 0 to 39 columns either way:
    the mean absolute difference over the overlapping columns, the smallest winning (a strict
    ``<`` scan: first the current profile against the previous shifted left, then right);
@@ -25,12 +27,14 @@ import math
 from collections.abc import Iterable, Iterator
 from dataclasses import replace
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.errors import InputFileError
 from cogmap_core.frames import Frame
 from cogmap_core.frontend.config import FrontEndConfig
+from cogmap_core.frontend.local_view import averages_colour, grey_image
 
 SHIFTS = 40
 """Columns a profile is shifted by at most, each way (OpenRatSLAM's ``slen``)."""
@@ -71,13 +75,25 @@ class VisualOdometry:
         return strips
 
     def profiles(self, image: NDArray[np.uint8]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The speed and rotation strips' column profiles (means in [0, 1])."""
+        """The speed and rotation strips' column profiles (means in [0, 1]).
+
+        A colour image ``(h, w, 3)`` sums blue, green and red (module doc).
+        """
+        if image.ndim == 3 and not averages_colour(self.config):
+            image = grey_image(image)
         out = []
-        strips = self._strips_for(image.shape)
+        strips = self._strips_for(image.shape[:2])
         for rows, cols in strips:
             strip = image[rows, cols]
-            sums = strip.sum(axis=0, dtype=np.int64)
-            out.append(sums / 255.0 / strip.shape[0])
+            if strip.ndim == 3:
+                height, width = strip.shape[:2]
+                flat = np.ascontiguousarray(strip).reshape(height, width * 3)
+                per_byte = cv2.reduce(flat, 0, cv2.REDUCE_SUM, dtype=cv2.CV_32S)
+                sums = per_byte.reshape(width, 3).sum(axis=1, dtype=np.int64)
+                out.append(sums / 765.0 / height)
+            else:
+                sums = strip.sum(axis=0, dtype=np.int64)
+                out.append(sums / 255.0 / strip.shape[0])
             if strips[0] == strips[1]:  # one strip for both: one profile
                 return out[0], out[0]
         return out[0], out[1]
