@@ -50,7 +50,10 @@ from tests.test_server_support import (
 short_bag = support.short_bag  # session fixtures shared by the web-app tests
 reference = support.reference
 
-# A value for every slider that changes at least one map on the short bag.
+# A value for every slider that changes at least one map on the short bag -- but the Huber
+# scale: with the default loop model it holds only the odometry edges, whose residuals on this
+# bag stay below even the slider's least value (it still rebuilds them, to the same maps).
+INERT_ON_THE_SHORT_BAG = frozenset({"huber_scale"})
 CHANGES: tuple[tuple[str, float], ...] = (
     ("alpha", 40.0),
     ("beta", 0.0),
@@ -161,7 +164,8 @@ def test_every_slider_rebuilds_the_maps_it_affects(short_bag: Path, reference: S
                 assert_same_map(app.replay.session.maps[mode], expected[mode])
                 if name not in PARAMS_USED[mode]:  # not rebuilt at all
                     assert app.replay.session.maps[mode] is before[mode]
-            assert any(differs(before[m], expected[m]) for m in MapMode), name
+            changed = any(differs(before[m], expected[m]) for m in MapMode)
+            assert changed is (name not in INERT_ON_THE_SHORT_BAG), name
             compact = expected[MapMode.COMPACT]
             assert counter(app, "compact-vertices") == str(compact.num_vertices)
             assert counter(app, "compact-clusters") == str(len(compact.clusters))
