@@ -308,3 +308,15 @@ def test_serve_replays_an_image_folder_at_the_given_rate(tmp_path: Path) -> None
         assert replay.state is PlaybackState.ENDED, replay.message
         assert replay.session.log.frames == 6
         assert replay.session.log.frame_time[-1] == pytest.approx(1.25)
+
+
+def test_camera_only_inputs_judge_loop_closures_past_a_metre() -> None:
+    from cogmap_core.config import MapParams
+    from cogmap_core.sources.detect import KINDS
+
+    for kind in ("video", "images"):
+        params = KINDS[kind].map_params
+        assert params == MapParams(loop_scale=33.3)  # only the loop scale differs from a bag's
+        model = params.loop_closure_model()
+        assert model is not None and model.scale == pytest.approx(0.999, abs=1e-12)
+    assert KINDS["bag"].map_params == MapParams()

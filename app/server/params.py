@@ -57,7 +57,7 @@ ADVANCED_SLIDERS: tuple[SliderSpec, ...] = (
         "Huber loss scale (m, rad): odometry edges; every edge with the paper's loop model",
     ),
     SliderSpec(
-        "loop scale", "loop_scale", 0.2, 10.0, 0.1, "robust loop-closure kernel scale (link σ)"
+        "loop scale", "loop_scale", 0.2, 50.0, 0.1, "robust loop-closure kernel scale (link σ)"
     ),
     SliderSpec(
         "short edge (m)", "short_edge_threshold", 0.0, 0.5, 0.005, "edges shorter are removed"

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cogmap_core.config import MapParams
-from cogmap_core.datasets.camera_common import CameraReader
+from cogmap_core.datasets.camera_common import CAMERA_ONLY_MAP_CHANGES, CameraReader
 from cogmap_core.datasets.image_folder import image_files, open_image_folder
 from cogmap_core.datasets.odometry_csv import looks_like_csv, read_odometry_csv
 from cogmap_core.datasets.profile import frontend_config_for
@@ -65,10 +65,13 @@ class InputKind:
     evaluation: EvaluationSettings
 
 
+CAMERA_ONLY_MAP_PARAMS = MapParams().with_changes(**CAMERA_ONLY_MAP_CHANGES)
+"""Default map parameters for videos and image folders (visual odometry)."""
+
 KINDS: dict[str, InputKind] = {
     "bag": InputKind("bag", True, MapParams(), EvaluationSettings()),
-    "video": InputKind("video", True, MapParams(), EvaluationSettings()),
-    "images": InputKind("images", True, MapParams(), EvaluationSettings()),
+    "video": InputKind("video", True, CAMERA_ONLY_MAP_PARAMS, EvaluationSettings()),
+    "images": InputKind("images", True, CAMERA_ONLY_MAP_PARAMS, EvaluationSettings()),
     "tuc": InputKind("tuc", False, LOG_MAP_PARAMS, LOG_EVALUATION),
     "csv": InputKind("csv", False, LOG_MAP_PARAMS, LOG_EVALUATION),
 }
