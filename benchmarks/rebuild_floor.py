@@ -49,7 +49,9 @@ from cogmap_core.slam import EventLog  # noqa: E402
 CHANGED = MapParams().with_changes(delta=4.5)
 
 
-def _start_poses(graph: PoseGraph, options: OptimizerOptions | None = None) -> OptimizationResult:
+def _start_poses(
+    graph: PoseGraph, options: OptimizerOptions | None = None, **_: object
+) -> OptimizationResult:
     """An optimiser that returns its start poses at no cost (events-only timing)."""
     return OptimizationResult(graph.poses.copy(), 0.0, 0.0, 0, 0.0, "SKIPPED")
 
