@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cogmap_core import compiled_replay
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_file import KIND_LINK
@@ -49,6 +50,8 @@ from cogmap_core.slam import EventLog
 
 #: Events applied between two checks for a newer request during a rebuild.
 REBUILD_CHUNK = 1000
+#: The same with the compiled replay (:mod:`cogmap_core.compiled_replay`), some 30 times faster.
+COMPILED_CHUNK = 20000
 #: How often (s) a waiting builder checks whether its request was superseded.
 POLL_S = 0.005
 
@@ -97,20 +100,30 @@ def build_map(
 ) -> CognitiveMap:
     """What ``SlamSession.rebuild`` does for one map, abandoned when ``interrupted()`` says so.
 
+    The events are applied by the compiled replay (:mod:`cogmap_core.compiled_replay`) from the
+    log's columns when it is available, else by the map's Python code; both give the same map.
     ``events``: the log's events already made into objects (at least those the task uses), to
-    skip making them again from the log's columns.
+    skip making them again from the log's columns (the Python path only).
 
     Raises:
         Abandoned: ``interrupted()`` returned True between two chunks of events.
 
     """
     end = int(log.frame_end[task.frames - 1]) if task.frames else 0
-    source = log.events if events is None else events
     cmap = CognitiveMap(task.mode, task.params)
-    for lo in range(0, end, REBUILD_CHUNK):
-        if interrupted is not None and interrupted():
-            raise Abandoned
-        cmap.apply_all(source[lo : min(lo + REBUILD_CHUNK, end)])
+    if compiled_replay.available():
+        columns = log.columns(end)
+        replayer = compiled_replay.CompiledReplay(cmap)
+        for lo in range(0, end, COMPILED_CHUNK):
+            if interrupted is not None and interrupted():
+                raise Abandoned
+            replayer.apply(columns, lo, min(lo + COMPILED_CHUNK, end))
+    else:
+        source = log.events if events is None else events
+        for lo in range(0, end, REBUILD_CHUNK):
+            if interrupted is not None and interrupted():
+                raise Abandoned
+            cmap.apply_all(source[lo : min(lo + REBUILD_CHUNK, end)])
     if task.finish and task.frames:
         cmap.finish(log.frame_time[task.frames - 1])
     if interrupted is not None and interrupted():
@@ -306,7 +319,8 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
         elif kind == "append":
             _, columns, frame_end, frame_time = message
             log.extend(columns, frame_end, frame_time)
-            events.extend(log.events[len(events) :])
+            if not compiled_replay.available():  # the compiled replay reads the columns
+                events.extend(log.events[len(events) :])
         elif kind == "build":
             _, task_id, task = message
             started = time.perf_counter()
