@@ -588,11 +588,18 @@ class CompiledReplay:
         self._seen: tuple[int, int, int] | None = None  # graph counts when the table was made
         self.escapes = 0
 
-    def apply(self, columns: Mapping[str, NDArray[Any]], lo: int, hi: int) -> None:
+    def apply(
+        self,
+        columns: Mapping[str, NDArray[Any]],
+        lo: int,
+        hi: int,
+        after_python: Callable[[int], None] | None = None,
+    ) -> None:
         """Apply events ``lo .. hi - 1`` of event columns to the map.
 
         The columns are those of :meth:`EventLog.columns <cogmap_core.slam.EventLog.columns>`
-        (``kind``, ``time``, ``ref``, ``view``, ``value0``, ``value1``).
+        (``kind``, ``time``, ``ref``, ``view``, ``value0``, ``value1``). ``after_python(k)`` is
+        called after the map's Python code applied event ``k`` (every cluster closes there).
 
         Raises:
             EventError: an event breaks the contract (raised by the map's Python code).
@@ -624,6 +631,8 @@ class CompiledReplay:
             else:
                 raise ValueError(f"unknown event kind {what}")
             self.cmap.apply(event)
+            if after_python is not None:
+                after_python(k)
             k += 1
 
     # ------------------------------------------------------------------ state in and out

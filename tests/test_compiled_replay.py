@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.server.rebuild import BuildTask, build_map_resumed, schedule_divergence
 from cogmap_core import compiled_replay
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
@@ -213,3 +214,40 @@ def test_the_numba_cache_goes_where_it_can_be_written(tmp_path: Path) -> None:
     env = {"NUMBA_CACHE_DIR": "/elsewhere"}
     assert compiled_replay.choose_cache(source, env, False, home, only())  # the user's choice
     assert env == {"NUMBA_CACHE_DIR": "/elsewhere"}
+
+
+def test_a_schedule_change_resumes_from_the_last_cluster_it_shares(logs) -> None:
+    log = logs["figure_eight_3laps"]
+    store: dict = {}
+    resumed_after = []
+    for mode in (MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
+        first, _ = build_map_resumed(
+            log, BuildTask(mode, MapParams(), log.frames, True), None, None, store
+        )
+        closed = [
+            c for c in first.clusters if c.closed_time is not None and c.closed_time < log.end_time
+        ]
+        assert len(store[mode].states) == len(closed)  # a state after each cluster's close
+        previous = MapParams()
+        for params in (
+            MapParams(t_total=20.0),  # the schedules part late
+            MapParams(t_total=10.0, t_interval=3.0),  # at the first cluster
+            MapParams(t_total=10.0, t_interval=3.0, delta=5.0),  # not a schedule change
+        ):
+            task = BuildTask(mode, params, log.frames, True)
+            diverge = schedule_divergence(log, log.event_count, previous, params)
+            held = [k for k, _ in store[mode].states if k <= diverge]
+            if (
+                previous.with_changes(t_interval=params.t_interval, t_total=params.t_total)
+                != params
+            ):
+                held = []
+            cmap, resumed = build_map_resumed(log, task, None, None, store)
+            assert resumed == (held[-1] if held else 0)
+            assert_same_state(cmap, python_map(log, mode, params))
+            resumed_after.append(resumed)
+            previous = params
+    assert resumed_after[0] > log.event_count // 2 and resumed_after[3] > log.event_count // 2
+    assert (
+        build_map_resumed(log, BuildTask(mode, MapParams(t_total=20.0), log.frames, True))[1] == 0
+    )
