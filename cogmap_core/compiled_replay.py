@@ -45,15 +45,20 @@ import sys
 import tempfile
 from collections.abc import Callable, Mapping, MutableMapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
-
-if TYPE_CHECKING:
-    from cogmap_core.cognitive_map import CognitiveMap
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.event_file import columns_to_events, events_to_columns
+from cogmap_core.events import (
+    CreateVertex,
+    LinkToVertex,
+    MapEvent,
+    Odometry,
+    SetCurrentVertex,
+)
 
 #: Set to "0" to never use the compiled replay (e.g. to time the Python path).
 ENV_SWITCH = "COGMAP_COMPILED_REPLAY"
@@ -97,22 +102,6 @@ def choose_cache(
     return False  # nowhere to write (or numba already set up otherwise): compile every time
 
 
-_CACHE = choose_cache(
-    Path(__file__).resolve().parent / "__pycache__",
-    os.environ,
-    "numba" in sys.modules,
-    Path(os.path.expanduser("~")),
-)
-
-try:
-    import numba
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is a dependency; this keeps a broken install usable
-    numba = None
-    _IMPORT_ERROR: str | None = "numba is not installed"
-else:
-    _IMPORT_ERROR = None
-
 TWO_PI = 2.0 * math.pi
 _T27 = 134217729.0  # 2**27 + 1: Veltkamp's split of a double into two halves
 _DBL_MIN = 2.2250738585072014e-308
@@ -141,7 +130,7 @@ _EMPTY = -1  # a free slot of the edge table
 def _python_hypot(x: float, y: float) -> float:
     """CPython 3.11's ``math.hypot`` of two values (``vector_norm``), step by step.
 
-    Kept in plain Python so that it is compiled by numba below; tested against ``math.hypot``.
+    Plain Python, compiled by :func:`_load`; tested against ``math.hypot`` bit for bit.
     """
     ax, ay = abs(x), abs(y)
     if math.isnan(ax) or math.isnan(ay):
@@ -505,24 +494,53 @@ def _check(xs: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-if numba is not None:
-    _jit = njit(cache=_CACHE)
-    _hypot = _jit(_python_hypot)
-    _wrap = _jit(_wrap)  # type: ignore[assignment]
-    _pair_key = _jit(_pair_key)  # type: ignore[assignment]
-    _slot = _jit(_slot)  # type: ignore[assignment]
-    _table_insert = _jit(_table_insert)  # type: ignore[assignment]
-    _build_table = _jit(_build_table)  # type: ignore[assignment]
-    _edge_between = _jit(_edge_between)  # type: ignore[assignment]
-    _excess = _jit(_excess)  # type: ignore[assignment]
-    _record_size = _jit(_record_size)  # type: ignore[assignment]
-    _replay = _jit(_replay)  # type: ignore[assignment]
-    _check = _jit(_check)  # type: ignore[assignment]
-else:  # pragma: no cover
-    _hypot = _python_hypot
-
+_hypot = _python_hypot  # until _load() compiles it
+#: The functions compiled by :func:`_load` (each module global is replaced by its compiled self).
+_COMPILED = (
+    "_wrap",
+    "_pair_key",
+    "_slot",
+    "_table_insert",
+    "_build_table",
+    "_edge_between",
+    "_excess",
+    "_record_size",
+    "_replay",
+    "_check",
+)
 _AVAILABLE: bool | None = None
-_REASON: str | None = _IMPORT_ERROR
+_REASON: str | None = None
+
+
+def _load() -> None:
+    """Import numba, compile the loop (or load it from the cache) and check it (once)."""
+    global _AVAILABLE, _REASON, _hypot
+    _AVAILABLE = False
+    cache = choose_cache(
+        Path(__file__).resolve().parent / "__pycache__",
+        os.environ,
+        "numba" in sys.modules,
+        Path(os.path.expanduser("~")),
+    )
+    try:
+        import numba
+    except ImportError:
+        _REASON = "numba is not installed"
+        return
+    try:
+        jit = numba.njit(cache=cache)
+        compiled = {name: jit(globals()[name]) for name in _COMPILED}
+        compiled["_hypot"] = jit(_python_hypot)
+        globals().update(compiled)  # the loop calls them by their module names
+        _AVAILABLE = _self_check()
+        if not _AVAILABLE:
+            _REASON = "compiled arithmetic differs from CPython's"
+        else:
+            _warm_up()
+    except Exception as exc:  # a broken numba or LLVM: the Python path still works
+        _AVAILABLE = False
+        _REASON = f"{type(exc).__name__}: {exc}"
+        _hypot = _python_hypot
 
 
 def available() -> bool:
@@ -531,23 +549,15 @@ def available() -> bool:
     Checked once per process (compiling the loop, or loading it from the cache); the
     environment variable ``COGMAP_COMPILED_REPLAY=0`` turns it off.
     """
-    global _AVAILABLE, _REASON
     if os.environ.get(ENV_SWITCH, "1") == "0":
         return False
     if _AVAILABLE is None:
-        _AVAILABLE = False
-        if numba is not None:
-            try:
-                _AVAILABLE = _self_check()
-                if not _AVAILABLE:
-                    _REASON = "compiled arithmetic differs from CPython's"
-            except Exception as exc:  # a broken numba or LLVM: the Python path still works
-                _REASON = f"{type(exc).__name__}: {exc}"
-    return _AVAILABLE
+        _load()
+    return bool(_AVAILABLE)
 
 
 def unavailable_reason() -> str | None:
-    """Why the compiled replay is not used (None when it is, or was not asked for yet)."""
+    """Why the compiled replay is not used (None when it is)."""
     return None if available() else _REASON or f"{ENV_SWITCH}=0"
 
 
@@ -573,6 +583,19 @@ def _self_check() -> bool:
     return bool(np.array_equal(got, want))
 
 
+def _warm_up() -> None:
+    """Run the compiled loop once on a few events, so that a first rebuild does not compile it."""
+    events: list[MapEvent] = [
+        Odometry(0.1, 0.1, 0.0),
+        CreateVertex(0.1, 0, 0),
+        Odometry(0.2, 0.1, 0.1),
+        CreateVertex(0.2, 1, 1),
+        LinkToVertex(0.3, 0, 0.0),
+        SetCurrentVertex(0.3, 0, 0.0),
+    ]
+    CompiledReplay(CognitiveMap(MapMode.COMPACT)).apply(events_to_columns(events), 0, len(events))
+
+
 class CompiledReplay:
     """Applies event columns to one map, compiled where it can (module doc).
 
@@ -586,6 +609,11 @@ class CompiledReplay:
         self._table = np.full((0, 2), _EMPTY, dtype=np.int64)
         self._table_used = 0
         self._seen: tuple[int, int, int] | None = None  # graph counts when the table was made
+        self._edge_log = np.empty((0, 3), dtype=np.int64)
+        self._absorbed_log = np.empty((0, 2), dtype=np.int64)
+        self._run_log = np.empty(0, dtype=np.int64)
+        self._hist = np.empty((1, 3))
+        #: events the map's Python code applied (the compiled loop stopped before them)
         self.escapes = 0
 
     def apply(
@@ -713,10 +741,14 @@ class CompiledReplay:
             st[I_AT], st[I_AT_ROBOT], st[I_AT_END] = 1, at[0], at[1]
         st[I_TABLE_USED] = self._table_used
         n = hi - lo
-        edge_log = np.empty((n, 3), dtype=np.int64)
-        absorbed_log = np.empty((n, 2), dtype=np.int64)
-        run_log = np.empty(n, dtype=np.int64)
-        hist = np.empty((n + 1, 3))
+        if self._run_log.shape[0] < n:  # the logs, kept from one stretch to the next
+            size = max(n, 2 * self._run_log.shape[0])
+            self._edge_log = np.empty((size, 3), dtype=np.int64)
+            self._absorbed_log = np.empty((size, 2), dtype=np.int64)
+            self._run_log = np.empty(size, dtype=np.int64)
+            self._hist = np.empty((size + 1, 3))
+        edge_log, absorbed_log = self._edge_log, self._absorbed_log
+        run_log, hist = self._run_log, self._hist
         if cmap._hist_time:
             hist[0] = (cmap._hist_time[-1], cmap._hist_vertices[-1], cmap._hist_edges[-1])
             fs[F_HIST_TIME] = cmap._hist_time[-1]
@@ -797,8 +829,6 @@ def replay(cmap: CognitiveMap, columns: Mapping[str, NDArray[Any]], lo: int, hi:
     if available():
         CompiledReplay(cmap).apply(columns, lo, hi)
         return
-    from cogmap_core.event_file import columns_to_events
-
     cmap.apply_all(columns_to_events({name: columns[name][lo:hi] for name in _COLUMNS}))
 
 

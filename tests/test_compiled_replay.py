@@ -247,6 +247,12 @@ def test_a_schedule_change_resumes_from_the_last_cluster_it_shares(logs) -> None
             assert_same_state(cmap, python_map(log, mode, params))
             resumed_after.append(resumed)
             previous = params
+        assert store[mode].states == []  # none kept after a change of more than the schedule
+        params = previous.with_changes(t_total=20.0)
+        cmap, resumed = build_map_resumed(
+            log, BuildTask(mode, params, log.frames, True), None, None, store
+        )
+        assert resumed == 0 and store[mode].states  # kept again
     assert resumed_after[0] > log.event_count // 2 and resumed_after[3] > log.event_count // 2
     assert (
         build_map_resumed(log, BuildTask(mode, MapParams(t_total=20.0), log.frames, True))[1] == 0

@@ -136,9 +136,10 @@ def build_map(
     ``events``: the log's events already made into objects (at least those the task uses), to
     skip making them again from the log's columns (the Python path only).
     ``checkpoints``: map states kept by earlier builds of this log (compiled path only); a
-    build whose parameters differ from those of its map's states only in ``T_interval`` and
-    ``T_total`` resumes from the latest state before its cluster schedule differs, and the build
-    leaves its own states there. The map is the same either way.
+    build whose parameters differ from those of its map's previous build only in ``T_interval``
+    and ``T_total`` resumes from the latest state before its cluster schedule differs and keeps
+    its own states there (any other change builds from the first event and keeps none, see
+    :func:`_resume`). The map is the same either way.
 
     Raises:
         Abandoned: ``interrupted()`` returned True between two chunks of events.
@@ -165,7 +166,7 @@ def build_map_resumed(
         def after_python(k: int) -> None:  # a cluster closes only in the map's Python code
             nonlocal closed
             now = _closed_clusters(cmap)
-            if now != closed:
+            if now != closed and states is not None:
                 closed = now
                 states.append((k + 1, pickle.dumps(cmap, protocol=pickle.HIGHEST_PROTOCOL)))
 
@@ -174,7 +175,7 @@ def build_map_resumed(
                 raise Abandoned
             replayer.apply(columns, lo, min(lo + COMPILED_CHUNK, end), after_python)
         if checkpoints is not None:
-            checkpoints[task.mode] = Checkpoints(task.params, states)
+            checkpoints[task.mode] = Checkpoints(task.params, states or [])
     else:
         start = 0
         cmap = CognitiveMap(task.mode, task.params)
@@ -197,19 +198,28 @@ def _closed_clusters(cmap: CognitiveMap) -> int:
 
 def _resume(
     log: EventLog, task: BuildTask, end: int, checkpoints: CheckpointStore | None
-) -> tuple[CognitiveMap, int, list[tuple[int, bytes]]]:
-    """The map to continue from, the events it holds, and the states kept up to there."""
-    held = checkpoints.get(task.mode) if checkpoints is not None else None
-    if held is not None and held.states:
+) -> tuple[CognitiveMap, int, list[tuple[int, bytes]] | None]:
+    """The map to continue from, the events it holds, and the states kept up to there.
+
+    The states are None when the build keeps none: its parameters differ from the map's
+    previous build in more than the schedule (an α, β or δ change of the compact map, where a
+    pickle per cluster would cost a tenth of the build); the next schedule change builds from
+    the first event and keeps them again.
+    """
+    if checkpoints is None:
+        return CognitiveMap(task.mode, task.params), 0, None
+    held = checkpoints.get(task.mode)
+    if held is not None:
         changed = {k for k, v in held.params.to_dict().items() if getattr(task.params, k) != v}
-        if changed <= SCHEDULE_PARAMS:
-            diverge = schedule_divergence(log, end, held.params, task.params)
-            usable = [state for state in held.states if state[0] <= diverge]
-            if usable:
-                start, blob = usable[-1]
-                cmap: CognitiveMap = pickle.loads(blob)
-                cmap.set_params(task.params)
-                return cmap, start, usable
+        if not changed <= SCHEDULE_PARAMS:
+            return CognitiveMap(task.mode, task.params), 0, None
+        diverge = schedule_divergence(log, end, held.params, task.params)
+        usable = [state for state in held.states if state[0] <= diverge]
+        if usable:
+            start, blob = usable[-1]
+            cmap: CognitiveMap = pickle.loads(blob)
+            cmap.set_params(task.params)
+            return cmap, start, usable
     return CognitiveMap(task.mode, task.params), 0, []
 
 
@@ -406,6 +416,7 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
 
     While it builds, a ``("cancel",)`` message makes it drop the build (checked between chunks).
     """
+    compiled_replay.available()  # loads (or compiles) the compiled replay before any request
     log = EventLog()
     events: list[MapEvent] = []  # the log's events as objects, made once as they arrive
     checkpoints: CheckpointStore = {}  # the states of the maps built here (their latest build)
