@@ -604,7 +604,14 @@ class CompiledReplay:
     """
 
     def __init__(self, cmap: CognitiveMap) -> None:
-        """Replay into ``cmap`` (any state: new, or built part of the way)."""
+        """Replay into ``cmap`` (any state: new, or built part of the way).
+
+        Raises:
+            RuntimeError: the compiled replay is not available (:func:`available`).
+
+        """
+        if not available():
+            raise RuntimeError(f"no compiled replay: {unavailable_reason()}")
         self.cmap = cmap
         self._table = np.full((0, 2), _EMPTY, dtype=np.int64)
         self._table_used = 0

@@ -180,6 +180,8 @@ def test_without_numba_the_python_code_replays(logs, monkeypatch) -> None:
     compiled_replay.replay(cmap, log.columns(), 0, log.event_count)
     cmap.finish(log.end_time)
     assert_same_state(cmap, python_map(log, MapMode.COMPACT, MapParams()))
+    with pytest.raises(RuntimeError, match="no compiled replay"):
+        compiled_replay.CompiledReplay(cmap)
 
 
 def test_hypot_is_cpythons_to_the_last_bit() -> None:
