@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.server import rebuild
 from app.server.rebuild import BuildTask, build_map_resumed, schedule_divergence
 from cogmap_core import compiled_replay
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
@@ -259,3 +260,20 @@ def test_a_schedule_change_resumes_from_the_last_cluster_it_shares(logs) -> None
     assert (
         build_map_resumed(log, BuildTask(mode, MapParams(t_total=20.0), log.frames, True))[1] == 0
     )
+
+
+def test_kept_states_stay_few_and_still_resume_exactly(logs, monkeypatch) -> None:
+    monkeypatch.setattr(rebuild, "MAX_CHECKPOINTS", 3)
+    log = logs["figure_eight_3laps"]
+    store: dict = {}
+    build_map_resumed(
+        log, BuildTask(MapMode.COMPACT, MapParams(), log.frames, True), None, None, store
+    )
+    kept = [k for k, _ in store[MapMode.COMPACT].states]
+    assert 2 <= len(kept) <= 3 and kept == sorted(kept)
+    params = MapParams(t_total=20.0)
+    cmap, resumed = build_map_resumed(
+        log, BuildTask(MapMode.COMPACT, params, log.frames, True), None, None, store
+    )
+    assert resumed in kept and resumed > 0
+    assert_same_state(cmap, python_map(log, MapMode.COMPACT, params))

@@ -55,6 +55,10 @@ COMPILED_CHUNK = 20000
 #: How often (s) a waiting builder checks whether its request was superseded.
 POLL_S = 0.005
 
+#: At most this many map states kept per build (:class:`Checkpoints`); past it, every other one
+#: is dropped (60 laps close some 240 clusters, each state a pickle of up to a few MB).
+MAX_CHECKPOINTS = 48
+
 #: The parameters of the loop-closure clustering (the cluster schedule).
 SCHEDULE_PARAMS = frozenset({"t_interval", "t_total"})
 
@@ -110,7 +114,8 @@ class Checkpoints:
     Attributes:
         params: the parameters the states were built with.
         states: (events applied, the map pickled) after each event at which a cluster closed,
-            in order.
+            in order (every other one dropped whenever there are more than
+            :data:`MAX_CHECKPOINTS`).
 
     """
 
@@ -169,6 +174,8 @@ def build_map_resumed(
             if now != closed and states is not None:
                 closed = now
                 states.append((k + 1, pickle.dumps(cmap, protocol=pickle.HIGHEST_PROTOCOL)))
+                if len(states) > MAX_CHECKPOINTS:  # every other one goes: memory stays bounded
+                    states[:] = states[::2]
 
         for lo in range(start, end, COMPILED_CHUNK):
             if interrupted is not None and interrupted():
