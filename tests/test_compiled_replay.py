@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -277,3 +279,26 @@ def test_kept_states_stay_few_and_still_resume_exactly(logs, monkeypatch) -> Non
     )
     assert resumed in kept and resumed > 0
     assert_same_state(cmap, python_map(log, MapMode.COMPACT, params))
+
+
+def test_without_numba_installed_rebuilds_use_the_python_code() -> None:
+    recording = str(DATA / "junction_dead_end_2laps.events.npz")
+    code = (
+        "import sys; sys.modules['numba'] = None\n"  # import numba raises ImportError
+        "from cogmap_core import compiled_replay as c\n"
+        "from cogmap_core.slam import EventLog\n"
+        "from cogmap_core.event_file import load_event_file\n"
+        "from app.server.rebuild import BuildTask, build_map\n"
+        "from cogmap_core.cognitive_map import MapMode\n"
+        "from cogmap_core.config import MapParams\n"
+        f"log = EventLog.from_recording(load_event_file({recording!r}))\n"
+        "cmap = build_map(log, BuildTask(MapMode.COMPACT, MapParams(), log.frames, True))\n"
+        "print(c.available(), c.unavailable_reason(), cmap.num_vertices)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    ).stdout.split()
+    expected = python_map(
+        EventLog.from_recording(load_event_file(recording)), MapMode.COMPACT, MapParams()
+    )
+    assert out == ["False", "numba", "is", "not", "installed", str(expected.num_vertices)]
