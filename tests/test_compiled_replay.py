@@ -302,3 +302,18 @@ def test_without_numba_installed_rebuilds_use_the_python_code() -> None:
         EventLog.from_recording(load_event_file(recording)), MapMode.COMPACT, MapParams()
     )
     assert out == ["False", "numba", "is", "not", "installed", str(expected.num_vertices)]
+
+
+def test_a_newer_request_stops_a_compiled_build_between_optimisations(logs) -> None:
+    log = logs["figure_eight_3laps"]
+    task = BuildTask(MapMode.STANDARD, MapParams(), log.frames, True)
+    asked = []
+
+    def interrupted() -> bool:
+        asked.append(True)
+        return len(asked) > 5
+
+    with pytest.raises(rebuild.Abandoned):
+        build_map_resumed(log, task, interrupted)
+    assert len(asked) == 6  # asked again at events the Python code applied, not only per chunk
+    assert log.event_count < rebuild.COMPILED_CHUNK

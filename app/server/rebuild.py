@@ -50,7 +50,8 @@ from cogmap_core.slam import EventLog
 
 #: Events applied between two checks for a newer request during a rebuild.
 REBUILD_CHUNK = 1000
-#: The same with the compiled replay (:mod:`cogmap_core.compiled_replay`), some 30 times faster.
+#: The same with the compiled replay (:mod:`cogmap_core.compiled_replay`), which also checks
+#: after every event the map's Python code applies (each optimisation among them).
 COMPILED_CHUNK = 20000
 #: How often (s) a waiting builder checks whether its request was superseded.
 POLL_S = 0.005
@@ -170,6 +171,8 @@ def build_map_resumed(
 
         def after_python(k: int) -> None:  # a cluster closes only in the map's Python code
             nonlocal closed
+            if interrupted is not None and interrupted():
+                raise Abandoned  # (between two optimisations: a long bag's chunk takes seconds)
             now = _closed_clusters(cmap)
             if now != closed and states is not None:
                 closed = now
