@@ -15,7 +15,8 @@ FROM python:3.11-slim
 ENV PYTHONDONTWRITEBYTECODE=1 \
     PYTHONUNBUFFERED=1 \
     PIP_NO_CACHE_DIR=1 \
-    COGMAP_CACHE=/var/cache/cogmap
+    COGMAP_CACHE=/var/cache/cogmap \
+    NUMBA_CACHE_DIR=/var/cache/cogmap/numba
 
 RUN apt-get update \
     && apt-get install -y --no-install-recommends libglib2.0-0 \
@@ -40,6 +41,9 @@ USER cogmap:cogmap
 
 # Generate the default dataset into $COGMAP_CACHE at build time: the container starts at once.
 RUN cogmap dataset path
+# Compile the map replay (numba, cogmap_core/compiled_replay.py) into that cache as that user too:
+# the first parameter change does not wait for it (the installed code itself is read-only).
+RUN python -c "from cogmap_core import compiled_replay as c; assert c.available(), c.unavailable_reason()"
 
 EXPOSE 8080
 # `cogmap serve` stops cleanly on SIGTERM (docker stop) as on Ctrl-C. The page lists the bags of

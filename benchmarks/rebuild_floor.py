@@ -2,7 +2,9 @@
 
 A parameter change on the page rebuilds a map exactly as ``cogmap run`` builds it (see
 ``app/server/rebuild.py``): every front-end event is applied again and every batch optimisation
-of the cluster schedule runs again. This benchmark splits that cost in two for each map:
+of the cluster schedule runs again. This benchmark splits that cost in two for each map, with
+the compiled replay (``cogmap_core/compiled_replay.py``, numba) and with the map's Python code
+(``COGMAP_COMPILED_REPLAY=0``), measured in the same process:
 
 - **full**: the rebuild as the page does it (``app.server.rebuild.build_map``: the events and
   the Ceres solves);
@@ -18,15 +20,16 @@ changing the map.
 
     python benchmarks/rebuild_floor.py [BAG] [--long BAG60]
 
-Times are the best of ``--repeat`` runs in this process; the ratio column is events-only / full.
-The last line reads ``events-only floor: N ms (MAP, BAG)`` for the last bag measured (the
-``--long`` bag when one is given).
+Times are the best of ``--repeat`` runs in this process (the compiled code is loaded or compiled
+before timing). The last line reads ``events-only floor: N ms compiled, M ms Python (MAP, BAG)``
+for the last bag measured (the ``--long`` bag when one is given).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import sys
 import time
 from collections.abc import Iterator
@@ -38,6 +41,7 @@ import cogmap_core.cognitive_map as cognitive_map  # noqa: E402
 from app.cli_common import resolve_bag  # noqa: E402
 from app.server.rebuild import BuildTask, build_map  # noqa: E402
 from app.sweep import cached_bag_events  # noqa: E402
+from cogmap_core import compiled_replay  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.events import MapEvent  # noqa: E402
@@ -49,7 +53,9 @@ from cogmap_core.slam import EventLog  # noqa: E402
 CHANGED = MapParams().with_changes(delta=4.5)
 
 
-def _start_poses(graph: PoseGraph, options: OptimizerOptions | None = None) -> OptimizationResult:
+def _start_poses(
+    graph: PoseGraph, options: OptimizerOptions | None = None, **_: object
+) -> OptimizationResult:
     """An optimiser that returns its start poses at no cost (events-only timing)."""
     return OptimizationResult(graph.poses.copy(), 0.0, 0.0, 0, 0.0, "SKIPPED")
 
@@ -66,35 +72,48 @@ def solves_skipped() -> Iterator[None]:
 
 
 def build_seconds(
-    log: EventLog, events: list[MapEvent], mode: MapMode, repeat: int
+    log: EventLog, mode: MapMode, repeat: int, compiled: bool, events: list[MapEvent] | None
 ) -> tuple[float, int]:
     """Best time (s) of the page's rebuild (``build_map``) of ``mode``, and its optimisations."""
     task = BuildTask(mode, CHANGED, log.frames, finish=True)
     best, count = float("inf"), 0
-    for _ in range(repeat):
-        started = time.perf_counter()
-        cmap = build_map(log, task, events=events)
-        best = min(best, time.perf_counter() - started)
-        count = len(cmap.optimizations)
+    os.environ[compiled_replay.ENV_SWITCH] = "1" if compiled else "0"
+    try:
+        for _ in range(repeat):
+            started = time.perf_counter()
+            cmap = build_map(log, task, events=events)
+            best = min(best, time.perf_counter() - started)
+            count = len(cmap.optimizations)
+    finally:
+        os.environ.pop(compiled_replay.ENV_SWITCH, None)
     return best, count
 
 
-def measure(bag: Path, repeat: int) -> tuple[float, MapMode]:
-    """Print the table for one bag; return its lowest events-only floor among the maps."""
+def measure(bag: Path, repeat: int) -> tuple[float, float, MapMode]:
+    """Print the table for one bag; return its lowest events-only floor (compiled, Python)."""
     log = EventLog.from_recording(cached_bag_events(bag, print))
     print(f"{bag.name}: {log.frames} frames, {log.event_count} events")
-    header = ("full ms", 9), ("events only ms", 15), ("ratio", 6), ("optimisations", 14)
+    header = (
+        ("full ms", 9),
+        ("(Python)", 9),
+        ("events only ms", 15),
+        ("(Python)", 9),
+        ("ratio", 6),
+        ("optimisations", 14),
+    )
     print(f"{'map':18s} " + " ".join(f"{name:>{width}s}" for name, width in header))
     events = list(log.events)  # made into objects once, as the page's workers hold them
-    floors: list[tuple[float, MapMode]] = []
+    floors: list[tuple[float, float, MapMode]] = []
     for mode in (MapMode.COMPACT, MapMode.SCENE_INTEGRATION, MapMode.STANDARD):
-        full, count = build_seconds(log, events, mode, repeat)
+        full, count = build_seconds(log, mode, repeat, True, None)
+        full_py, _ = build_seconds(log, mode, repeat, False, events)
         with solves_skipped():
-            events_only, _ = build_seconds(log, events, mode, repeat)
-        floors.append((events_only, mode))
+            events_only, _ = build_seconds(log, mode, repeat, True, None)
+            events_py, _ = build_seconds(log, mode, repeat, False, events)
+        floors.append((events_only, events_py, mode))
         print(
-            f"{mode.value:18s} {1000 * full:9.0f} {1000 * events_only:15.0f} "
-            f"{events_only / full:6.2f} {count:14d}"
+            f"{mode.value:18s} {1000 * full:9.0f} {1000 * full_py:9.0f} {1000 * events_only:15.1f} "
+            f"{1000 * events_py:9.1f} {events_only / full:6.2f} {count:14d}"
         )
     return min(floors, key=lambda f: f[0])
 
@@ -107,8 +126,13 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=2, help="runs per figure (best kept)")
     args = parser.parse_args()
     bags = [resolve_bag(args.bag)] + ([Path(args.long)] if args.long else [])
+    if not compiled_replay.available():
+        raise SystemExit(f"no compiled replay: {compiled_replay.unavailable_reason()}")
     floor = [measure(bag, args.repeat) for bag in bags][-1]
-    print(f"events-only floor: {1000 * floor[0]:.0f} ms ({floor[1].value}, {bags[-1].name})")
+    print(
+        f"events-only floor: {1000 * floor[0]:.0f} ms compiled, {1000 * floor[1]:.0f} ms Python "
+        f"({floor[2].value}, {bags[-1].name})"
+    )
     return 0
 
 

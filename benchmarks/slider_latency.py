@@ -13,18 +13,26 @@ beta, delta, T_interval, T_total) it types ``--values`` values never used before
 the cache is emptied between shown maps), then the paper's values back. It reports the median
 latency per map and slider against the 200 ms target, how each map was obtained (built in a
 worker process, kept because the change does not affect it or leaves its cluster schedule as
-it was, or taken from the cache), the cost of returning to values met before (the cache), a
-slider storm (many changes per second: work never queues), and the same table on a long bag
-(``--long BAG``, e.g. a 60-lap bag from ``cogmap make-maze BAG --laps 60``) against 500 ms.
+it was, or taken from the cache; "resumed" when a T_interval or T_total rebuild continued
+from the map's state at the last cluster its schedule shares with the map before), the cost of
+returning to values met before (the cache), a slider storm (many changes per second: work never
+queues), and the same table on a long bag (``--long BAG``, e.g. a 60-lap bag from
+``cogmap make-maze BAG --laps 60``) against 2 s (issue 27).
+
+Each latency is that of the exact map (what ``cogmap run`` gives for the new values). The app
+shows no preview before it (part 4 of issue 27 is not built), so the preview latency reported
+is the exact one: the first map shown is the exact map.
 
     python benchmarks/slider_latency.py [BAG] [--values 3] [--long BAG] [--storm 60]
 
-The last line reads ``worst median latency: N ms (MAP, SLIDER)`` (the default dataset).
+The last line reads ``worst median latency: N ms exact, M ms preview (MAP, SLIDER)`` (the
+default dataset; M = N while there is no preview).
 """
 
 from __future__ import annotations
 
 import argparse
+import array
 import contextlib
 import io
 import math
@@ -47,7 +55,7 @@ from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.slam import EventLog  # noqa: E402
 
 TARGET_S = 0.200
-LONG_TARGET_S = 0.500
+LONG_TARGET_S = 2.0  # issue 27: exact map within 2 s on 60 laps
 MODES = (MapMode.COMPACT, MapMode.SCENE_INTEGRATION, MapMode.STANDARD)
 ORDER = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 #: Fresh values per slider (the paper's: alpha = beta = 10, delta = 3.746, 2 s, 100 s).
@@ -69,7 +77,7 @@ def loaded_app(bag: Path, port: int) -> tuple[CogmapApp, viser.ViserServer]:
     app = CogmapApp(server, bag, speed=math.inf, autoplay=False)
     log = EventLog.from_recording(recording)
     app.replay.session.log = log  # what the first pass would have cached
-    app.replay.view_templates = [None] * log.frames
+    app.replay.view_templates = array.array("q", [-1] * log.frames)  # (-1: none known)
     started = time.perf_counter()
     app.start()
     replay = app.replay
@@ -142,25 +150,36 @@ def measure(app: CogmapApp, count: int, label: str) -> dict[tuple[MapMode, str],
                 assert shown is not None
                 total = max(record.published.values()) - record.requested
                 how = " / ".join(
-                    f"{record.compute_s[m] * 1000:5.0f} {record.how[m]:6}" for m in ORDER
+                    f"{record.compute_s[m] * 1000:5.0f} {obtained(record, m):7}" for m in ORDER
                 )
                 results.setdefault((mode, name), []).append(shown)
-                hows.setdefault((mode, name), set()).add(record.how[mode])
+                hows.setdefault((mode, name), set()).add(obtained(record, mode))
                 print(
                     f"{mode.value:18} {SHORT[name]:>10} {value:7.3f} {shown * 1000:9.1f} "
                     f"{total * 1000:9.1f}  {how}"
                 )
             back_to_paper(app)
     print()
-    print(f"{label}: median latency (ms) per map and slider, how the shown map was obtained")
-    print(f"{'slider':>10} " + " ".join(f"{m.value:>26}" for m in MODES))
+    print(
+        f"{label}: median latency (ms) per map and slider, exact / preview (no preview: the "
+        "exact map comes first), how the shown map was obtained"
+    )
+    print(f"{'slider':>10} " + " ".join(f"{m.value:>34}" for m in MODES))
     for name in VALUES:
         cells = []
         for mode in MODES:
             med = statistics.median(results[(mode, name)]) * 1000
-            cells.append(f"{med:9.0f} ({'/'.join(sorted(hows[(mode, name)])):>14})")
-        print(f"{SHORT[name]:>10} " + " ".join(f"{c:>26}" for c in cells))
+            ways = "/".join(sorted(hows[(mode, name)]))
+            cells.append(f"{med:7.0f} / {med:5.0f} ({ways:>16})")
+        print(f"{SHORT[name]:>10} " + " ".join(f"{c:>34}" for c in cells))
     return results
+
+
+def obtained(record: RebuildRecord, mode: MapMode) -> str:
+    """How a rebuild obtained a map: built, resumed (from a cluster's state), kept, cached."""
+    if record.how[mode] == "built" and record.resumed.get(mode, 0) > 0:
+        return "resumed"
+    return record.how[mode]
 
 
 def revisit(app: CogmapApp) -> None:
@@ -173,7 +192,7 @@ def revisit(app: CogmapApp) -> None:
     assert shown is not None
     print(
         f"back to a value met before (T_interval 3, standard shown): {shown * 1000:.1f} ms "
-        f"({', '.join(f'{m.value} {record.how[m]}' for m in ORDER)})"
+        f"({', '.join(f'{m.value} {obtained(record, m)}' for m in ORDER)})"
     )
     back_to_paper(app)
 
@@ -239,11 +258,14 @@ def main() -> int:
     if long_results is not None:
         med, mode, name = worst(long_results)
         print(
-            f"long bag worst median latency: {med * 1000:.0f} ms ({mode.value}, {SHORT[name]}); "
-            f"target {LONG_TARGET_S * 1000:.0f} ms"
+            f"long bag worst median latency: {med * 1000:.0f} ms exact, {med * 1000:.0f} ms "
+            f"preview ({mode.value}, {SHORT[name]}); target {LONG_TARGET_S * 1000:.0f} ms"
         )
     med, mode, name = worst(results)
-    print(f"worst median latency: {med * 1000:.0f} ms ({mode.value}, {SHORT[name]})")
+    print(
+        f"worst median latency: {med * 1000:.0f} ms exact, {med * 1000:.0f} ms preview "
+        f"({mode.value}, {SHORT[name]})"
+    )
     return 0
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode, MapSet
+from cogmap_core.compiled_replay import replay
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
@@ -614,6 +615,9 @@ class SlamSession:
     ) -> dict[MapMode, CognitiveMap]:
         """Rebuild maps from the cached events with other parameters (the bag is not re-read).
 
+        The events are replayed by :func:`cogmap_core.compiled_replay.replay` (compiled when
+        numba is available; the same maps as :meth:`CognitiveMap.apply_all`).
+
         Args:
             params: the new map parameters.
             frames: rebuild up to this many frames (default: all processed so far).
@@ -623,13 +627,17 @@ class SlamSession:
 
         """
         modes = modes or self.modes
-        events = self.log.events_until(frames)
+        log = self.log
+        end = log.event_count if frames is None or frames >= log.frames else 0
+        if frames is not None and 0 < frames < log.frames:
+            end = int(log.frame_end[frames - 1])
+        columns = log.columns(end)
         if finish is None:
             finish = self.finished and (frames is None or frames >= self.log.frames)
         rebuilt: dict[MapMode, CognitiveMap] = {}
         for mode in modes:
             cmap = CognitiveMap(mode, params)
-            cmap.apply_all(events)
+            replay(cmap, columns, 0, end)
             if finish:
                 cmap.finish(self.log.end_time)
             rebuilt[mode] = cmap

@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.compiled_replay import replay
 from cogmap_core.config import MapParams, validate_parameter
 from cogmap_core.errors import ParameterError
 from cogmap_core.evaluation import LAYOUT_RADIUS
@@ -388,7 +389,7 @@ def evaluate_cell(
     """
     started = time.perf_counter()
     cmap = CognitiveMap(mode, params)
-    cmap.apply_all(log.events)
+    replay(cmap, log.columns(), 0, log.event_count)  # compiled when numba is available
     end = log.end_time
     cmap.finish(end)
     built = time.perf_counter()

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cogmap_core import compiled_replay
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_file import KIND_LINK
@@ -49,8 +50,15 @@ from cogmap_core.slam import EventLog
 
 #: Events applied between two checks for a newer request during a rebuild.
 REBUILD_CHUNK = 1000
+#: The same with the compiled replay (:mod:`cogmap_core.compiled_replay`), which also checks
+#: after every event the map's Python code applies (each optimisation among them).
+COMPILED_CHUNK = 20000
 #: How often (s) a waiting builder checks whether its request was superseded.
 POLL_S = 0.005
+
+#: At most this many map states kept per build (:class:`Checkpoints`); past it, every other one
+#: is dropped (60 laps close some 240 clusters, each state a pickle of up to a few MB).
+MAX_CHECKPOINTS = 48
 
 #: The parameters of the loop-closure clustering (the cluster schedule).
 SCHEDULE_PARAMS = frozenset({"t_interval", "t_total"})
@@ -82,11 +90,42 @@ class BuildTask:
 
 @dataclass(frozen=True, slots=True)
 class Built:
-    """A finished build: the map and how long it took (s) where it was built."""
+    """A finished build: the map and how long it took (s) where it was built.
+
+    ``resumed_at``: the events it did not replay again, resumed from a map state kept at a
+    cluster's close (:class:`Checkpoints`); 0 when built from the first event.
+    """
 
     task: BuildTask
     cmap: CognitiveMap
     compute_s: float
+    resumed_at: int = 0
+
+
+@dataclass(slots=True)
+class Checkpoints:
+    """A built map's states at its clusters' closes, to resume a schedule change from.
+
+    The clustering thresholds ``T_interval`` and ``T_total`` act on a map only through its
+    cluster schedule (:func:`cluster_schedule`): two schedules that agree on their first clusters
+    build the same map up to the first event at which they differ
+    (:func:`schedule_divergence`), so a map for new thresholds continues from the latest state
+    kept before that event instead of from the first event.
+
+    Attributes:
+        params: the parameters the states were built with.
+        states: (events applied, the map pickled) after each event at which a cluster closed,
+            in order (every other one dropped whenever there are more than
+            :data:`MAX_CHECKPOINTS`).
+
+    """
+
+    params: MapParams
+    states: list[tuple[int, bytes]]
+
+
+#: Per map, the states its latest build kept (:class:`Checkpoints`), where it was built.
+CheckpointStore = dict[MapMode, Checkpoints]
 
 
 def build_map(
@@ -94,28 +133,104 @@ def build_map(
     task: BuildTask,
     interrupted: Interrupted | None = None,
     events: Sequence[MapEvent] | None = None,
+    checkpoints: CheckpointStore | None = None,
 ) -> CognitiveMap:
     """What ``SlamSession.rebuild`` does for one map, abandoned when ``interrupted()`` says so.
 
+    The events are applied by the compiled replay (:mod:`cogmap_core.compiled_replay`) from the
+    log's columns when it is available, else by the map's Python code; both give the same map.
     ``events``: the log's events already made into objects (at least those the task uses), to
-    skip making them again from the log's columns.
+    skip making them again from the log's columns (the Python path only).
+    ``checkpoints``: map states kept by earlier builds of this log (compiled path only); a
+    build whose parameters differ from those of its map's previous build only in ``T_interval``
+    and ``T_total`` resumes from the latest state before its cluster schedule differs and keeps
+    its own states there (any other change builds from the first event and keeps none, see
+    :func:`_resume`). The map is the same either way.
 
     Raises:
         Abandoned: ``interrupted()`` returned True between two chunks of events.
 
     """
+    return build_map_resumed(log, task, interrupted, events, checkpoints)[0]
+
+
+def build_map_resumed(
+    log: EventLog,
+    task: BuildTask,
+    interrupted: Interrupted | None = None,
+    events: Sequence[MapEvent] | None = None,
+    checkpoints: CheckpointStore | None = None,
+) -> tuple[CognitiveMap, int]:
+    """:func:`build_map`, and the number of events it resumed after (0: from the first)."""
     end = int(log.frame_end[task.frames - 1]) if task.frames else 0
-    source = log.events if events is None else events
-    cmap = CognitiveMap(task.mode, task.params)
-    for lo in range(0, end, REBUILD_CHUNK):
-        if interrupted is not None and interrupted():
-            raise Abandoned
-        cmap.apply_all(source[lo : min(lo + REBUILD_CHUNK, end)])
+    if compiled_replay.available():
+        cmap, start, states = _resume(log, task, end, checkpoints)
+        columns = log.columns(end)
+        replayer = compiled_replay.CompiledReplay(cmap)
+        closed = _closed_clusters(cmap)
+
+        def after_python(k: int) -> None:  # a cluster closes only in the map's Python code
+            nonlocal closed
+            if interrupted is not None and interrupted():
+                raise Abandoned  # (between two optimisations: a long bag's chunk takes seconds)
+            now = _closed_clusters(cmap)
+            if now != closed and states is not None:
+                closed = now
+                states.append((k + 1, pickle.dumps(cmap, protocol=pickle.HIGHEST_PROTOCOL)))
+                if len(states) > MAX_CHECKPOINTS:  # every other one goes: memory stays bounded
+                    states[:] = states[::2]
+
+        for lo in range(start, end, COMPILED_CHUNK):
+            if interrupted is not None and interrupted():
+                raise Abandoned
+            replayer.apply(columns, lo, min(lo + COMPILED_CHUNK, end), after_python)
+        if checkpoints is not None:
+            checkpoints[task.mode] = Checkpoints(task.params, states or [])
+    else:
+        start = 0
+        cmap = CognitiveMap(task.mode, task.params)
+        source = log.events if events is None else events
+        for lo in range(0, end, REBUILD_CHUNK):
+            if interrupted is not None and interrupted():
+                raise Abandoned
+            cmap.apply_all(source[lo : min(lo + REBUILD_CHUNK, end)])
     if task.finish and task.frames:
         cmap.finish(log.frame_time[task.frames - 1])
     if interrupted is not None and interrupted():
         raise Abandoned
-    return cmap
+    return cmap, start
+
+
+def _closed_clusters(cmap: CognitiveMap) -> int:
+    """How many of a map's loop-closure clusters are closed."""
+    return len(cmap.clusterer.clusters) - (cmap.clusterer.open_cluster is not None)
+
+
+def _resume(
+    log: EventLog, task: BuildTask, end: int, checkpoints: CheckpointStore | None
+) -> tuple[CognitiveMap, int, list[tuple[int, bytes]] | None]:
+    """The map to continue from, the events it holds, and the states kept up to there.
+
+    The states are None when the build keeps none: its parameters differ from the map's
+    previous build in more than the schedule (an α, β or δ change of the compact map, where a
+    pickle per cluster would cost a tenth of the build); the next schedule change builds from
+    the first event and keeps them again.
+    """
+    if checkpoints is None:
+        return CognitiveMap(task.mode, task.params), 0, None
+    held = checkpoints.get(task.mode)
+    if held is not None:
+        changed = {k for k, v in held.params.to_dict().items() if getattr(task.params, k) != v}
+        if not changed <= SCHEDULE_PARAMS:
+            return CognitiveMap(task.mode, task.params), 0, None
+        diverge = schedule_divergence(log, end, held.params, task.params)
+        usable = [state for state in held.states if state[0] <= diverge]
+        if usable:
+            start, blob = usable[-1]
+            cmap: CognitiveMap = pickle.loads(blob)
+            cmap.set_params(task.params)
+            return cmap, start, usable
+    return CognitiveMap(task.mode, task.params), 0, []
 
 
 # ---------------------------------------------------------------------------------- schedule
@@ -206,6 +321,26 @@ def same_schedule(
     )
 
 
+def schedule_divergence(log: EventLog, end: int, old: MapParams, new: MapParams) -> int:
+    """How many of the first ``end`` events maps built with ``old`` and ``new`` apply alike.
+
+    For parameters that differ only in ``t_interval``/``t_total``: the clusters before the first
+    one whose (first link, last link, close) differs are the same, and that cluster starts at
+    the same link in both schedules; the maps are the same until the earlier of its two closes
+    (where one of them is optimised). ``end`` when the schedules agree throughout.
+    """
+    columns = log.columns(end)
+    times, links = columns["time"], np.flatnonzero(columns["kind"] == KIND_LINK)
+    a = cluster_schedule(times, links, end, False, old.t_interval, old.t_total)
+    b = cluster_schedule(times, links, end, False, new.t_interval, new.t_total)
+    for c in range(min(len(a), len(b))):
+        if a[c] != b[c]:
+            return min(end if a[c][2] < 0 else a[c][2], end if b[c][2] < 0 else b[c][2])
+    if len(a) != len(b):  # (cannot happen over the same links; be safe: its first link)
+        return (a if len(a) > len(b) else b)[min(len(a), len(b))][0]
+    return end
+
+
 # ---------------------------------------------------------------------------------- cache
 CacheKey = tuple[MapMode, tuple[tuple[str, float], ...], int, bool, int]
 
@@ -254,9 +389,14 @@ class MapCache:
 
 # ---------------------------------------------------------------------------------- builders
 class ThreadBuilder:
-    """Builds maps one after the other on the calling thread."""
+    """Builds maps one after the other on the calling thread (keeping their cluster states)."""
 
     workers = 0
+
+    def __init__(self) -> None:
+        """No map built yet."""
+        self._log: EventLog | None = None
+        self._checkpoints: CheckpointStore = {}
 
     def build(
         self, log: EventLog, tasks: Sequence[BuildTask], interrupted: Interrupted
@@ -267,10 +407,12 @@ class ThreadBuilder:
             Abandoned: ``interrupted()`` became true.
 
         """
+        if log is not self._log:
+            self._log, self._checkpoints = log, {}
         for task in tasks:
             started = time.perf_counter()
-            cmap = build_map(log, task, interrupted)
-            yield Built(task, cmap, time.perf_counter() - started)
+            cmap, resumed = build_map_resumed(log, task, interrupted, None, self._checkpoints)
+            yield Built(task, cmap, time.perf_counter() - started, resumed)
 
     def prepare(self, log: EventLog) -> None:
         """Nothing to send."""
@@ -284,8 +426,10 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
 
     While it builds, a ``("cancel",)`` message makes it drop the build (checked between chunks).
     """
+    compiled_replay.available()  # loads (or compiles) the compiled replay before any request
     log = EventLog()
     events: list[MapEvent] = []  # the log's events as objects, made once as they arrive
+    checkpoints: CheckpointStore = {}  # the states of the maps built here (their latest build)
 
     def cancelled() -> bool:
         if conn.poll(0):
@@ -302,16 +446,17 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
         if kind == "stop":
             return
         if kind == "reset":
-            log, events = EventLog(), []
+            log, events, checkpoints = EventLog(), [], {}
         elif kind == "append":
             _, columns, frame_end, frame_time = message
             log.extend(columns, frame_end, frame_time)
-            events.extend(log.events[len(events) :])
+            if not compiled_replay.available():  # the compiled replay reads the columns
+                events.extend(log.events[len(events) :])
         elif kind == "build":
             _, task_id, task = message
             started = time.perf_counter()
             try:
-                cmap = build_map(log, task, cancelled, events)
+                cmap, resumed = build_map_resumed(log, task, cancelled, events, checkpoints)
             except Abandoned:
                 conn.send(("abandoned", task_id))
                 continue
@@ -319,7 +464,7 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
                 conn.send(("error", task_id, f"{type(exc).__name__}: {exc}"))
                 continue
             payload = pickle.dumps(cmap, protocol=pickle.HIGHEST_PROTOCOL)
-            conn.send(("done", task_id, payload, time.perf_counter() - started))
+            conn.send(("done", task_id, payload, time.perf_counter() - started, resumed))
         # ("cancel",) arriving while idle: the build it meant is over already
 
 
@@ -343,6 +488,7 @@ class _Worker:
         self.events = 0  # events of that log sent so far
         self.frames = 0
         self.busy: int | None = None  # task id in flight
+        self.modes: set[MapMode] = set()  # the maps whose latest build it made
 
     @property
     def alive(self) -> bool:
@@ -449,6 +595,7 @@ class ProcessBuilder:
         if worker.log is not log or worker.frames > log.frames:  # another log: start over
             worker.conn.send(("reset",))
             worker.log, worker.events, worker.frames = log, 0, 0
+            worker.modes = set()
         frames = log.frames
         if worker.frames == frames:
             return
@@ -490,14 +637,12 @@ class ProcessBuilder:
         running: dict[int, tuple[_Worker, BuildTask]] = {}
         try:
             while pending or running:
-                for worker in workers:
-                    if pending and worker.busy is None:
-                        task = pending.pop(0)
-                        self._sync(worker, log)
-                        self._next_task += 1
-                        worker.busy = self._next_task
-                        worker.conn.send(("build", self._next_task, task))
-                        running[self._next_task] = (worker, task)
+                for worker, task in self._assign(workers, pending):
+                    self._sync(worker, log)
+                    self._next_task += 1
+                    worker.busy = self._next_task
+                    worker.conn.send(("build", self._next_task, task))
+                    running[self._next_task] = (worker, task)
                 if interrupted():
                     raise Abandoned
                 ready = multiprocessing.connection.wait(
@@ -509,7 +654,7 @@ class ProcessBuilder:
                     worker.busy = None
                     _, task = running.pop(reply[1])
                     if reply[0] == "done":
-                        yield Built(task, pickle.loads(reply[2]), float(reply[3]))
+                        yield Built(task, pickle.loads(reply[2]), float(reply[3]), int(reply[4]))
                     elif reply[0] == "error":
                         raise RuntimeError(f"rebuild of the {task.mode.value} map: {reply[2]}")
                     else:  # abandoned: only after a cancel, which was raised already
@@ -517,6 +662,32 @@ class ProcessBuilder:
         except BaseException:
             self._cancel(workers)
             raise
+
+    @staticmethod
+    def _assign(
+        workers: list[_Worker], pending: list[BuildTask]
+    ) -> list[tuple[_Worker, BuildTask]]:
+        """Free workers and the tasks they take now (removed from ``pending``), in order.
+
+        A map goes to the worker that built it last when that one is free (it keeps the map's
+        cluster states, :class:`Checkpoints`), else to a free worker whose own maps no other
+        pending task needs.
+        """
+        out = []
+        for task in list(pending):
+            free = [w for w in workers if w.busy is None and all(w is not o for o, _ in out)]
+            if not free:
+                break
+            worker = next((w for w in free if task.mode in w.modes), None)
+            if worker is None:
+                others = {t.mode for t in pending if t is not task}
+                worker = next((w for w in free if not w.modes & others), free[0])
+            pending.remove(task)
+            for other in workers:
+                other.modes.discard(task.mode)
+            worker.modes.add(task.mode)
+            out.append((worker, task))
+        return out
 
     def _receive(self, worker: _Worker) -> tuple[Any, ...]:
         try:
@@ -573,13 +744,16 @@ __all__ = [
     "Abandoned",
     "BuildTask",
     "Built",
+    "Checkpoints",
     "MapCache",
     "ProcessBuilder",
     "ThreadBuilder",
     "build_map",
+    "build_map_resumed",
     "cluster_schedule",
     "make_builder",
     "same_schedule",
+    "schedule_divergence",
 ]
 
 

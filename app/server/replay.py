@@ -152,6 +152,9 @@ class RebuildRecord:
         published: ``time.perf_counter()`` when each map was handed to the listener.
         how: per map, ``"built"``, ``"cached"`` (built before for these parameters), ``"kept"``
             (the change does not affect it, or gives it the same cluster schedule).
+        resumed: per map built, the events it did not replay again: it continued from the state
+            kept at the last cluster close its schedule shares with the map built before
+            (:class:`~app.server.rebuild.Checkpoints`); 0 when built from the first event.
         completed: all maps rebuilt (False: abandoned for newer parameters).
 
     """
@@ -162,6 +165,7 @@ class RebuildRecord:
     compute_s: dict[MapMode, float] = field(default_factory=dict)
     published: dict[MapMode, float] = field(default_factory=dict)
     how: dict[MapMode, str] = field(default_factory=dict)
+    resumed: dict[MapMode, int] = field(default_factory=dict)
     completed: bool = False
 
     def latency(self, mode: MapMode) -> float | None:
@@ -902,6 +906,7 @@ class Replay:
             self._publish_rebuilt(record, mode, params, cmap, time.perf_counter() - started)
         for built in self.builder.build(log, tasks, lambda: self._generation != generation):
             record.how[built.task.mode] = "built"
+            record.resumed[built.task.mode] = built.resumed_at
             self._publish_rebuilt(record, built.task.mode, params, built.cmap, built.compute_s)
         record.completed = True
 
