@@ -35,7 +35,7 @@ from cogmap_core.datasets.layout import DEFAULT_LAYOUT  # noqa: E402
 from cogmap_core.datasets.profile import frontend_config_for  # noqa: E402
 from cogmap_core.evaluation import map_accuracy  # noqa: E402
 from cogmap_core.slam import SlamSession  # noqa: E402
-from cogmap_core.sources.detect import CameraOptions, open_source  # noqa: E402
+from cogmap_core.sources.detect import KINDS, CameraOptions, open_source  # noqa: E402
 
 RADIUS = 0.25
 TARGET_RATIO = 3.0
@@ -58,7 +58,8 @@ def run(path: Path) -> bool:
     frontend = frontend_config_for(path)
     started = time.perf_counter()
     cpu_started = time.process_time()
-    session = SlamSession(frontend_config=frontend)
+    kind = KINDS["video" if path.suffix else "images"]  # as cogmap run maps it
+    session = SlamSession(kind.map_params, frontend_config=frontend)
     with open_source(path, camera=CameraOptions(frontend=frontend)) as reader:
         for frame in reader.frames():
             session.process(frame)
