@@ -31,8 +31,6 @@ from cogmap_core.errors import CogmapError, InputFileError
 from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
     MapAccuracy,
-    false_loop_edges,
-    loop_edge_links,
     map_accuracy,
 )
 from cogmap_core.event_file import save_event_file
@@ -45,8 +43,7 @@ from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import (
     SlamSession,
-    link_resolution,
-    map_false_loop_edges,
+    map_false_loop_edge_mask,
     map_rejected_loop_edges,
     optimisation_summary,
 )
@@ -266,10 +263,13 @@ def session_summary(
         entry["refused_relocalisations"] = c.refused_relocalisations
         # loop-closure edges of the map made from a link the ground truth calls false (the
         # page's "false loop closures in the map"; None without ground truth)
-        entry["false_loop_edges"] = map_false_loop_edges(session.log, cmap, judging, final.snapshot)
+        false_edges = map_false_loop_edge_mask(session.log, cmap, judging, final.snapshot)
+        entry["false_loop_edges"] = (
+            None if false_edges is None else int(np.count_nonzero(false_edges))
+        )
         # the loop model's verdict at the final estimate, and (ground truth) how many were true
         rejected, rejected_true = map_rejected_loop_edges(
-            session.log, cmap, judging, final.snapshot
+            session.log, cmap, false_edges=false_edges
         )
         entry["rejected_loop_edges"] = rejected
         entry["rejected_true_loop_edges"] = rejected_true
@@ -673,8 +673,6 @@ class HeadlessPipeline:
         if log.has_ground_truth():
             truth_path = np.asarray(log.ground_truth)
             judging = self.session.evaluation
-            links = log.link_table()
-            false_links = log.false_links(judging.loop_distance, judging.loop_heading)
             for mode in MAP_ORDER:
                 accuracy = maps[mode].accuracy
                 snap = snaps[mode]
@@ -682,16 +680,9 @@ class HeadlessPipeline:
                     poses = snap.poses.copy()
                     poses[:, :2] = accuracy.alignment.apply(snap.poses[:, :2])
                     aligned[mode] = poses
-                if false_links is not None:
-                    alias, refused = link_resolution(maps[mode].cmap)
-                    made = loop_edge_links(
-                        np.array([t for t, _, _ in links]),
-                        np.array([g for _, g, _ in links], dtype=np.int64),
-                        snap,
-                        alias,
-                        refused,
-                    )
-                    false[mode] = false_loop_edges(made, false_links)
+                mask = map_false_loop_edge_mask(log, maps[mode].cmap, judging, snap)
+                if mask is not None:
+                    false[mode] = mask
         notes = {}
         for mode in MAP_ORDER:
             entry = summary["maps"][mode.value]

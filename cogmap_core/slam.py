@@ -678,16 +678,16 @@ def link_resolution(cmap: CognitiveMap) -> tuple[NDArray[np.int64], frozenset[tu
     return alias, refused
 
 
-def map_false_loop_edges(
+def map_false_loop_edge_mask(
     log: EventLog,
     cmap: CognitiveMap,
     judging: EvaluationSettings | None = None,
     snapshot: MapSnapshot | None = None,
-) -> int | None:
-    """How many of a map's loop-closure edges were made from links the ground truth calls false.
+) -> NDArray[np.bool_] | None:
+    """Per edge of the map's snapshot, whether it is a loop-closure edge made from a false link.
 
     "False loop closures in the map" on the page and in ``summary.json``: a live loop-closure
-    edge counts when the link that made it (:func:`~cogmap_core.evaluation.loop_edge_links`) is
+    edge is false when the link that made it (:func:`~cogmap_core.evaluation.loop_edge_links`) is
     false (``judging``'s tolerances, a bag's by default). None without ground truth.
     ``snapshot``: the map's snapshot when the caller has taken one.
     """
@@ -702,7 +702,21 @@ def map_false_loop_edges(
         np.array([t for t, _, _ in links]), np.array([g for _, g, _ in links], dtype=np.int64),
         snap, alias, refused,
     )  # fmt: skip
-    return int(np.count_nonzero(false_loop_edges(edge_links, false)))
+    return false_loop_edges(edge_links, false)
+
+
+def map_false_loop_edges(
+    log: EventLog,
+    cmap: CognitiveMap,
+    judging: EvaluationSettings | None = None,
+    snapshot: MapSnapshot | None = None,
+) -> int | None:
+    """How many of a map's loop-closure edges were made from links the ground truth calls false.
+
+    (:func:`map_false_loop_edge_mask`, counted; None without ground truth.)
+    """
+    mask = map_false_loop_edge_mask(log, cmap, judging, snapshot)
+    return None if mask is None else int(np.count_nonzero(mask))
 
 
 def map_rejected_loop_edges(
@@ -710,27 +724,19 @@ def map_rejected_loop_edges(
     cmap: CognitiveMap,
     judging: EvaluationSettings | None = None,
     snapshot: MapSnapshot | None = None,
+    false_edges: NDArray[np.bool_] | None = None,
 ) -> tuple[int, int | None]:
     """How many of a map's loop-closure edges its loop model rejects, and how many of them true.
 
-    Rejected: :meth:`~cogmap_core.cognitive_map.CognitiveMap.rejected_loop_edges`. True: made
-    from a link the ground truth does not call false (as :func:`map_false_loop_edges` judges;
-    None without ground truth). ``snapshot``: the map's snapshot when the caller has one.
+    Rejected: :meth:`~cogmap_core.cognitive_map.CognitiveMap.rejected_loop_edges`. True: not made
+    from a link the ground truth calls false (:func:`map_false_loop_edge_mask`, or
+    ``false_edges`` when the caller has it; None without ground truth).
     """
-    judging = judging or EvaluationSettings()
     rejected = cmap.rejected_loop_edges()
-    false = log.false_links(judging.loop_distance, judging.loop_heading)
-    if false is None:
-        return int(np.count_nonzero(rejected)), None
-    snap = cmap.snapshot() if snapshot is None else snapshot
-    alias, refused = link_resolution(cmap)
-    links = log.link_table()
-    edge_links = loop_edge_links(
-        np.array([t for t, _, _ in links]), np.array([g for _, g, _ in links], dtype=np.int64),
-        snap, alias, refused,
-    )  # fmt: skip
-    made_false = false_loop_edges(edge_links, false)
-    return int(np.count_nonzero(rejected)), int(np.count_nonzero(rejected & ~made_false))
+    if false_edges is None:
+        false_edges = map_false_loop_edge_mask(log, cmap, judging, snapshot)
+    true = None if false_edges is None else int(np.count_nonzero(rejected & ~false_edges))
+    return int(np.count_nonzero(rejected)), true
 
 
 def optimisation_summary(cmap: CognitiveMap) -> dict[str, float | int]:
