@@ -157,13 +157,9 @@ def _serve(args: argparse.Namespace) -> int:
         resume=resume,
         export_dir=export_dir,
         data_dirs=data_dirs,
-        # (the visual odometry of a named camera input takes the --frontend overrides too)
-        camera=camera_options_from_args(
-            args,
-            frontend_from_args(args, Path(args.bag))
-            if args.bag is not None and kind.has_camera
-            else None,
-        ),
+        # (each camera input's visual odometry takes its own front-end settings, --frontend
+        # overrides included: Replay.camera_options_for)
+        camera=camera_options_from_args(args),
     )
     folders = ", ".join(str(d) for d in data_dirs)
     print(

@@ -320,3 +320,16 @@ def test_camera_only_inputs_judge_loop_closures_past_a_metre() -> None:
         model = params.loop_closure_model()
         assert model is not None and model.scale == pytest.approx(0.999, abs=1e-12)
     assert KINDS["bag"].map_params == MapParams()
+
+
+def test_each_camera_input_gets_its_own_front_end_settings(tmp_path: Path) -> None:
+    # the page opens other inputs with the settings of each, not the first input's
+    from app.server.replay import resolve_frontend
+    from cogmap_core.datasets.profile import frontend_config_for
+
+    given = FrontEndConfig(camera_fov_deg=33.0)
+    folder = tmp_path / "run"
+    assert resolve_frontend(given, folder) is given
+    assert resolve_frontend(None, folder) == frontend_config_for(folder)
+    made = resolve_frontend(lambda p: FrontEndConfig(camera_fov_deg=len(p.name)), folder)
+    assert made.camera_fov_deg == 3

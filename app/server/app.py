@@ -1569,7 +1569,9 @@ class CogmapApp:
             if chosen.kind == "bag":
                 reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
             elif KINDS[chosen.kind].has_camera:  # a video or image folder (serve's --fps)
-                reader = open_source(chosen.path, chosen.kind, camera=self._camera)
+                reader = open_source(
+                    chosen.path, chosen.kind, camera=self.replay.camera_options_for(chosen.path)
+                )
             else:  # a log: read (and checked) whole, as cogmap serve FILE reads it
                 reader = open_source(chosen.path, chosen.kind, log=log_options)
             frames = reader.info.frame_count
@@ -1598,8 +1600,8 @@ class CogmapApp:
             old = self.replay
             params = old.params
             speed = old.speed
-            switched = kind.has_camera != old.has_camera
-            if switched:  # a log's map parameters are not a bag's: start from the kind's own
+            switched = kind.map_params != self.defaults
+            if switched:  # a log's (or a video's) map parameters are not a bag's: the kind's own
                 params = self.defaults = kind.map_params
             old.stop()  # joins its worker, which may be waiting for the replay lock
             with self._replay_lock, self.scene_lock:

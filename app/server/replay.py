@@ -67,6 +67,14 @@ BagSource = Path | Callable[[GenerationProgress], Path]
 #: A front-end configuration, or a function choosing it for the bag once it is known.
 FrontEndSource = FrontEndConfig | Callable[[Path], FrontEndConfig] | None
 
+
+def resolve_frontend(source: FrontEndSource, path: Path) -> FrontEndConfig:
+    """The front-end settings for a camera input at ``path``: given, computed, or its profile."""
+    if isinstance(source, FrontEndConfig):
+        return source
+    return frontend_config_for(path) if source is None else source(path)
+
+
 #: A replay that falls further behind its schedule than this (s) re-anchors instead of racing.
 MAX_LAG_S = 1.0
 _TIME_TOLERANCE = 1e-6
@@ -535,7 +543,7 @@ class Replay:
                     topics=self.topics,
                     image_scale=self.image_scale,
                     log=self.log_options,
-                    camera=self.camera_options,
+                    camera=self.camera_options_for(path),
                 )
             self.has_camera = KINDS[fmt].has_camera
             if self.session.log.frames == 0:  # the front end is chosen for the input
@@ -564,17 +572,18 @@ class Replay:
         self._notify_status()
         self._notify_maps(ALL_MODES, True)
 
+    def camera_options_for(self, path: Path) -> CameraOptions:
+        """The camera options with the front-end settings of ``path`` (its own profile).
+
+        A camera input's visual odometry and colour averaging take the settings its front end
+        runs with, not those of the input served first.
+        """
+        base = self.camera_options or CameraOptions()
+        return replace(base, frontend=resolve_frontend(self.frontend_source, path))
+
     def _choose_frontend(self, path: Path, fmt: str) -> None:
         kind = KINDS[fmt]
-        source = self.frontend_source
-        if not kind.has_camera:
-            config = None  # a log's events need no front end
-        elif isinstance(source, FrontEndConfig):
-            config = source
-        elif source is None:
-            config = frontend_config_for(path)
-        else:
-            config = source(path)
+        config = resolve_frontend(self.frontend_source, path) if kind.has_camera else None
         with self.lock:
             self.frontend_config = config
             self.session = SlamSession(self._target_params, config, evaluation=kind.evaluation)
