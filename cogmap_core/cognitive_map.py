@@ -52,7 +52,7 @@ from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, S
 from cogmap_core.geometry import TWO_PI, compose, compose_scalar, inverse_scalar, wrap_scalar
 from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot
 from cogmap_core.neighborhood_fields import is_novel, neighborhood_field
-from cogmap_core.optimizer import OptimizerOptions, chi2, optimize_pose_graph
+from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph, rejected_loop_closures
 from cogmap_core.posegraph import PoseGraph
 from cogmap_core.relocalisation import (
     RelocalisationCheck,
@@ -187,15 +187,9 @@ class CognitiveMap:
     def rejected_loop_edges(self) -> NDArray[np.bool_]:
         """Per live edge (:meth:`snapshot` order), whether the loop model rejects it now.
 
-        A loop-closure edge whose squared whitened residual at the map's current estimate is
-        past the loop model's kernel scale (:meth:`~cogmap_core.robust.Kernel.rejects`); none
-        under the paper's Huber (``loop_model`` 0), which rejects nothing.
+        (:func:`~cogmap_core.optimizer.rejected_loop_closures` at the map's current estimate.)
         """
-        graph = self.to_pose_graph()
-        model = self.params.loop_closure_model()
-        if model is None or graph.num_edges == 0:
-            return np.zeros(graph.num_edges, dtype=bool)
-        return graph.loop_closures() & model.final_kernel.rejects(chi2(graph))
+        return rejected_loop_closures(self.to_pose_graph(), self.params.loop_closure_model())
 
     @property
     def declined_vertices(self) -> int:

@@ -215,13 +215,13 @@ def edge_terms(
     pose_i: FloatArray,
     pose_j: FloatArray,
     model: EdgeModel,
-    losses: float | None | EdgeLosses,
+    losses: EdgeLosses | None,
     with_jacobians: bool,
 ) -> tuple[FloatArray, FloatArray | None]:
     """Whitened (and robustified) residuals ``(E, 3)`` and Jacobians ``(E, 2, 3, 3)``.
 
-    ``jac[:, 0]`` is d r / d pose_i and ``jac[:, 1]`` is d r / d pose_j. ``losses`` is a Huber
-    scale (every edge), None (plain least squares) or kernels per edge
+    ``jac[:, 0]`` is d r / d pose_i and ``jac[:, 1]`` is d r / d pose_j. ``losses`` is None
+    (plain least squares) or kernels per edge
     (:func:`~cogmap_core.robust.apply_kernel`): a robust residual is ``sqrt(rho(s)/s) r`` so
     that its squared norm is ``rho(s)``.
     """
@@ -247,9 +247,7 @@ def edge_terms(
         d[:, 1, 1, 0], d[:, 1, 1, 1] = -s, c
         d[:, 1, 2, 2] = 1.0
         jac = np.matmul(w[:, None], d)
-    if losses is None or isinstance(losses, int | float):
-        losses = edge_losses(losses)
-    for rows, kernel in losses:
+    for rows, kernel in losses or ():
         res, jac = apply_kernel(res, jac, kernel, rows)
     return res, jac
 
@@ -257,19 +255,17 @@ def edge_terms(
 def graph_cost(
     graph: PoseGraph,
     poses: FloatArray | None = None,
-    huber_scale: float | None = None,
     losses: EdgeLosses | None = None,
 ) -> float:
     """g2o cost ``1/2 sum rho(|S r|^2)`` of ``graph`` at ``poses`` (default: its own poses).
 
-    ``rho`` is Huber at ``huber_scale`` on every edge, or the kernels of ``losses`` if given.
+    ``rho`` is the kernels of ``losses`` (:func:`edge_losses`), the identity without them.
     """
     if graph.num_edges == 0:
         return 0.0
     x = graph.poses if poses is None else poses
     model = EdgeModel(graph.measurements, graph.information)
-    loss = edge_losses(huber_scale) if losses is None else losses
-    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, loss, False)
+    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, losses, False)
     return 0.5 * float(np.einsum("ka,ka->", res, res))
 
 
@@ -755,8 +751,19 @@ def optimize_pose_graph(
     )
 
 
-def _rejected(graph: PoseGraph, poses: FloatArray, options: OptimizerOptions) -> NDArray[np.bool_]:
-    """Loop closures whose chi^2 at ``poses`` is past the loop model's kernel scale."""
-    if options.loop_model is None or graph.num_edges == 0:
+def rejected_loop_closures(
+    graph: PoseGraph, model: LoopClosureModel | None, poses: FloatArray | None = None
+) -> NDArray[np.bool_]:
+    """``(E,)`` loop closures the loop model rejects at ``poses`` (default: the graph's).
+
+    Rejected: chi^2 past the model's kernel scale; none without a model (the paper's Huber
+    rejects nothing).
+    """
+    if model is None or graph.num_edges == 0:
         return np.zeros(graph.num_edges, dtype=bool)
-    return graph.loop_closures() & options.loop_model.final_kernel.rejects(chi2(graph, poses))
+    return graph.loop_closures() & model.final_kernel.rejects(chi2(graph, poses))
+
+
+def _rejected(graph: PoseGraph, poses: FloatArray, options: OptimizerOptions) -> NDArray[np.bool_]:
+    """Loop closures the options' loop model rejects at ``poses``."""
+    return rejected_loop_closures(graph, options.loop_model, poses)

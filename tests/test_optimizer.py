@@ -15,6 +15,7 @@ from cogmap_core.geometry import compose, polar_to_relative, wrap_angle
 from cogmap_core.optimizer import (
     EdgeModel,
     OptimizerOptions,
+    edge_losses,
     edge_terms,
     graph_cost,
     optimize_pose_graph,
@@ -98,7 +99,7 @@ def test_jacobians_match_finite_differences(huber):
     x = graph.poses + rng.normal(0, 0.5, graph.poses.shape)
     model = EdgeModel(graph.measurements, graph.information)
     xi, xj = x[graph.edge_from], x[graph.edge_to]
-    _, jac = edge_terms(xi, xj, model, huber, True)
+    _, jac = edge_terms(xi, xj, model, edge_losses(huber), True)
     h = 1e-6
     for endpoint, base in ((0, xi), (1, xj)):
         for c in range(3):
@@ -107,8 +108,8 @@ def test_jacobians_match_finite_differences(huber):
             minus[:, c] -= h
             args_p = (plus, xj) if endpoint == 0 else (xi, plus)
             args_m = (minus, xj) if endpoint == 0 else (xi, minus)
-            rp, _ = edge_terms(*args_p, model, huber, False)
-            rm, _ = edge_terms(*args_m, model, huber, False)
+            rp, _ = edge_terms(*args_p, model, edge_losses(huber), False)
+            rm, _ = edge_terms(*args_m, model, edge_losses(huber), False)
             np.testing.assert_allclose(jac[:, endpoint, :, c], (rp - rm) / (2 * h), atol=1e-5)
 
 
@@ -118,7 +119,7 @@ def test_huber_residual_squared_is_rho():
     x = graph.poses + rng.normal(0, 0.5, graph.poses.shape)
     model = EdgeModel(graph.measurements, graph.information)
     plain, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, None, False)
-    robust, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, 0.3, False)
+    robust, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, edge_losses(0.3), False)
     s = (plain**2).sum(1)
     rho = np.where(s <= 0.09, s, 2 * 0.3 * np.sqrt(s) - 0.09)
     assert (s > 0.09).sum() > 5 and (s <= 0.09).sum() >= 0
@@ -136,7 +137,7 @@ def test_optimum_matches_scipy_least_squares(huber):
 
     def fun(v):
         x = np.vstack([graph.poses[:1], v.reshape(-1, 3)])
-        r, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, huber, False)
+        r, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, edge_losses(huber), False)
         return r.ravel()
 
     ref = least_squares(fun, result.poses[1:].ravel(), xtol=1e-14, ftol=1e-14, gtol=1e-14)
