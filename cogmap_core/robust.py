@@ -94,9 +94,10 @@ GNC_SHRINK = 2.0
 IRLS_TOLERANCE = 1e-5
 """Reweighting stops when the robust cost changes by less than this fraction (one solve)."""
 MAP_IRLS_TOLERANCE = 1e-3
-"""... in a map's optimisations, which each next cluster continues from: on Lecture Hall the
-maps' ATE and fidelity stayed within 1 mm and 0.001 of 1e-5's, their optimisations 1.7x faster
-(``LoopClosureModel.tolerance``)."""
+"""... in a map's optimisations, which each next cluster continues from
+(``LoopClosureModel.tolerance``). Against 1e-5: the four built-in layouts' maps identical (V, ATE
+to 0.1 mm, fidelity), four generated logs' within 0.02 m, Lecture Hall's within 1 mm and 0.001 of
+fidelity, its optimisations 1.7x faster."""
 IRLS_ITERATIONS = 5
 """Ceres iterations between two reweightings."""
 IRLS_MAX_REWEIGHTINGS = 50
