@@ -59,6 +59,9 @@ from cogmap_core.events import (
     Odometry,
     SetCurrentVertex,
 )
+from cogmap_core.geometry import TWO_PI
+from cogmap_core.geometry import wrap_scalar as _wrap  # (compiled by _load, as its own)
+from cogmap_core.relocalisation import drift_excess as _excess  # (the same)
 
 #: Set to "0" to never use the compiled replay (e.g. to time the Python path).
 ENV_SWITCH = "COGMAP_COMPILED_REPLAY"
@@ -102,7 +105,6 @@ def choose_cache(
     return False  # nowhere to write (or numba already set up otherwise): compile every time
 
 
-TWO_PI = 2.0 * math.pi
 _T27 = 134217729.0  # 2**27 + 1: Veltkamp's split of a double into two halves
 _DBL_MIN = 2.2250738585072014e-308
 
@@ -177,11 +179,6 @@ def _python_hypot(x: float, y: float) -> float:
     frac3 += (old - csum) + v
     v = csum - 1.0 + (frac1 + frac2 + frac3)
     return factor * ((h + v / (2.0 * h)) / scale)
-
-
-def _wrap(angle: float) -> float:
-    """:func:`~cogmap_core.geometry.wrap_scalar`."""
-    return (angle + math.pi) % TWO_PI - math.pi
 
 
 def _pair_key(a: int, b: int) -> int:
@@ -472,15 +469,6 @@ def _replay(
             continue
         return k  # an unknown kind: the Python code raises
     return hi
-
-
-def _excess(error: float, tolerance: float, per_metre: float) -> float:
-    """:func:`cogmap_core.relocalisation._excess`."""
-    if error <= tolerance:
-        return 0.0
-    if per_metre <= 0.0:
-        return math.inf
-    return (error - tolerance) / per_metre
 
 
 def _check(xs: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -126,8 +126,8 @@ def check_relocalisation(
     p = params
     heading_tolerance = p.gate_heading + abs(robot.frame_rotation)
     excess = max(
-        _excess(position_error, p.gate_position, p.gate_drift_position),
-        _excess(heading_error, heading_tolerance, p.gate_drift_heading),
+        drift_excess(position_error, p.gate_position, p.gate_drift_position),
+        drift_excess(heading_error, heading_tolerance, p.gate_drift_heading),
     )
     if excess <= 0.0:
         return RelocalisationCheck(time, target, True, position_error, heading_error, correction)
@@ -195,7 +195,7 @@ def _agree(
     )
 
 
-def _excess(error: float, tolerance: float, per_metre: float) -> float:
+def drift_excess(error: float, tolerance: float, per_metre: float) -> float:
     """Path length (m) the error needs beyond the fixed tolerance to count as drift."""
     if error <= tolerance:
         return 0.0
