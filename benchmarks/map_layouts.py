@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.sweep import cached_bag_events
+from app.events_cache import cached_bag_events
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.cache import DATASET_VERSION, cache_dir, default_dataset_path

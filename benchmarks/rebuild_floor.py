@@ -39,8 +39,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import cogmap_core.cognitive_map as cognitive_map  # noqa: E402
 from app.cli_common import resolve_bag  # noqa: E402
+from app.events_cache import cached_bag_events  # noqa: E402
 from app.server.rebuild import BuildTask, build_map  # noqa: E402
-from app.sweep import cached_bag_events  # noqa: E402
 from cogmap_core import compiled_replay  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
