@@ -32,7 +32,7 @@ from cogmap_core.datasets import BagTopics, MazeConfig, generate_maze_bag
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.event_file import load_event_file
-from cogmap_core.slam import EventLog
+from cogmap_core.event_log import EventLog
 from cogmap_core.sweep import (
     FIGURE_COLUMNS,
     SettingFigures,

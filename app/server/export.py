@@ -36,10 +36,11 @@ from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
 from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import MapEvent, Odometry
 from cogmap_core.fileio import check_writable, output_error, write_text_atomic
 from cogmap_core.g2o import format_g2o
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.slam import SlamSession
 
 if TYPE_CHECKING:
     from app.server.replay import Replay

@@ -25,7 +25,7 @@ from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import LAYOUT_RADIUS
 from cogmap_core.event_file import FORMAT_VERSION, load_event_file
-from cogmap_core.slam import EventLog
+from cogmap_core.event_log import EventLog
 from cogmap_core.sweep import GROWTH_FRACTION, evaluate_cell
 
 CELL_VERSION = 1  # bump when a cell's figures change meaning: old rows are then not reused

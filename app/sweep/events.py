@@ -24,8 +24,8 @@ from app.events_cache import (
 from app.sweep.errors import SweepError
 from cogmap_core.errors import InputFileError
 from cogmap_core.event_file import load_event_file, save_event_file
+from cogmap_core.event_log import EventLog
 from cogmap_core.fileio import write_bytes_atomic
-from cogmap_core.slam import EventLog
 
 
 @dataclass(frozen=True, slots=True)
