@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from app.server.access import AccessPolicy, guarded_server
+from app.server.assets import read_asset
 from app.server.figures import judge_links, map_false_edges, truth_transform
 from app.server.files import REPLAY_MARKER, is_cogmap_replay
 from app.server.scene import MapExtras, SceneStreamer
@@ -170,8 +171,6 @@ def replay_caption(
     static_dir: Path | None = None,
 ) -> str:
     """The caption of an exported replay (``static/replay-caption.html`` filled in)."""
-    from app.server.assets import read_asset
-
     template = read_asset("replay-caption.html", static_dir)
     if not template:
         return ""
