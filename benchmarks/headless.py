@@ -40,7 +40,7 @@ from cogmap_core.config import MapParams
 from cogmap_core.datasets.cache import DEFAULT_CONFIG, default_dataset_path
 from cogmap_core.datasets.generator import plan_dataset
 from cogmap_core.event_file import KIND_LINK, load_event_file
-from cogmap_core.slam import EventLog
+from cogmap_core.event_log import EventLog
 
 
 def check(label: str, value: float, target: str, ok: bool) -> bool:

@@ -25,7 +25,7 @@ from map_layouts import LAYOUTS, MODES, load_dataset
 from cogmap_core.cognitive_map import CognitiveMap
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import absolute_trajectory_error
-from cogmap_core.slam import EventLog
+from cogmap_core.event_log import EventLog
 
 
 def first_lap_ate(cmap: CognitiveMap, log: EventLog, lap_end: float) -> float:

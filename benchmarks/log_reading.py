@@ -33,7 +33,7 @@ import numpy as np
 
 CHILD = """
 import resource, sys, time
-from cogmap_core.datasets.tuc import read_tuc
+from cogmap_core.sources.tuc import read_tuc
 t, cpu = time.perf_counter(), time.process_time()
 log = read_tuc(sys.argv[1], use_ground_truth=False)
 dt, cpu = time.perf_counter() - t, time.process_time() - cpu
@@ -112,8 +112,8 @@ def read_in_child(path: Path) -> tuple[float, float, float, int, int]:
 
 def lecture_hall(source: Path) -> None:
     """Best-of-5 read time of the real file and hashes of what it becomes."""
-    from cogmap_core.datasets.tuc import read_tuc
     from cogmap_core.sources.odometry_log import LogReader
+    from cogmap_core.sources.tuc import read_tuc
 
     best = float("inf")
     for _ in range(5):

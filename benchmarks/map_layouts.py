@@ -40,14 +40,14 @@ from pathlib import Path
 
 import numpy as np
 
-from app.sweep import cached_bag_events
+from app.events_cache import cached_bag_events
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.cache import DATASET_VERSION, cache_dir, default_dataset_path
 from cogmap_core.datasets.generator import MazeConfig, generate_maze_bag, plan_dataset
 from cogmap_core.event_file import EventRecording
+from cogmap_core.event_log import EventLog
 from cogmap_core.frontend.config import COGMAP_ARITHMETIC
-from cogmap_core.slam import EventLog
 
 LAYOUTS = ("irat_australia", "figure_eight", "long_corridors", "junction_dead_end")
 MODES = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)

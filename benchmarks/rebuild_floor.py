@@ -39,15 +39,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import cogmap_core.cognitive_map as cognitive_map  # noqa: E402
 from app.cli_common import resolve_bag  # noqa: E402
+from app.events_cache import cached_bag_events  # noqa: E402
 from app.server.rebuild import BuildTask, build_map  # noqa: E402
-from app.sweep import cached_bag_events  # noqa: E402
 from cogmap_core import compiled_replay  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
+from cogmap_core.event_log import EventLog  # noqa: E402
 from cogmap_core.events import MapEvent  # noqa: E402
 from cogmap_core.optimizer import OptimizationResult, OptimizerOptions  # noqa: E402
 from cogmap_core.posegraph import PoseGraph  # noqa: E402
-from cogmap_core.slam import EventLog  # noqa: E402
 
 #: A compact-map parameter change (as a δ slider move makes it); the other maps do not use δ.
 CHANGED = MapParams().with_changes(delta=4.5)

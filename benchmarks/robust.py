@@ -302,8 +302,8 @@ def part_d(quick: bool) -> list[float]:
     from map_layouts import LAYOUTS, load_dataset
 
     from cogmap_core.cognitive_map import CognitiveMap
+    from cogmap_core.event_log import EventLog
     from cogmap_core.events import CreateVertex
-    from cogmap_core.slam import EventLog
 
     print(
         "\n(d) maze layouts with false relocalisations injected (map ATE m; ratio to the clean "

@@ -46,6 +46,7 @@ from map_layouts import LAYOUTS, MODES, load_dataset  # noqa: E402
 from cogmap_core.cognitive_map import CognitiveMap, MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.datasets.layout import Layout, load_layout  # noqa: E402
+from cogmap_core.event_log import EventLog  # noqa: E402
 from cogmap_core.map_graph import EdgeKind, MapSnapshot  # noqa: E402
 from cogmap_core.routes import (  # noqa: E402
     TRUE_PATH_JOIN_RADIUS,
@@ -54,7 +55,6 @@ from cogmap_core.routes import (  # noqa: E402
     segments_on_path,
     true_path_graph,
 )
-from cogmap_core.slam import EventLog  # noqa: E402
 
 ON_PATH_TARGET = 0.99
 SAME_HEADING = np.radians(60.0)  # joins a view-based loop closure could make

@@ -47,12 +47,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import viser  # noqa: E402
 
 from app.cli_common import resolve_bag  # noqa: E402
+from app.events_cache import cached_bag_events  # noqa: E402
 from app.server.app import CogmapApp  # noqa: E402
 from app.server.replay import PlaybackState, RebuildRecord  # noqa: E402
-from app.sweep import cached_bag_events  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
-from cogmap_core.slam import EventLog  # noqa: E402
+from cogmap_core.event_log import EventLog  # noqa: E402
 
 TARGET_S = 0.200
 LONG_TARGET_S = 2.0  # issue 27: exact map within 2 s on 60 laps

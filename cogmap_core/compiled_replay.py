@@ -620,7 +620,7 @@ class CompiledReplay:
     ) -> None:
         """Apply events ``lo .. hi - 1`` of event columns to the map.
 
-        The columns are those of :meth:`EventLog.columns <cogmap_core.slam.EventLog.columns>`
+        The columns are those of :meth:`EventLog.columns <cogmap_core.event_log.EventLog.columns>`
         (``kind``, ``time``, ``ref``, ``view``, ``value0``, ``value1``). ``after_python(k)`` is
         called after the map's Python code applied event ``k`` (every cluster closes there).
 

@@ -542,7 +542,7 @@ def false_loop_edges(
     """Per edge, whether it is a loop-closure edge made from a link judged false.
 
     ``edge_links``: :func:`loop_edge_links`; ``false_links``: per link, whether the ground truth
-    calls it false (:meth:`~cogmap_core.slam.EventLog.false_links`). The definition of "false
+    calls it false (:meth:`~cogmap_core.event_log.EventLog.false_links`). The definition of "false
     loop closures in the map" of the page and of ``summary.json``.
     """
     made = edge_links >= 0

@@ -47,6 +47,7 @@ from cogmap_core.clustering import Cluster, LoopClosureClusterer
 from cogmap_core.cognitive_map import CognitiveMap, MapCounters, MapMode, OptimizationRecord
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.event_log import EventLog
 from cogmap_core.fileio import atomic_writer, load_archive
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.frontend.config import COGMAP_ARITHMETIC
@@ -55,7 +56,7 @@ from cogmap_core.frontend.pose_cells import _ViewCell
 from cogmap_core.map_graph import MapGraph, grow_array
 from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate
 from cogmap_core.scene_integration import KnownEdges, RevisitRun, SceneIntegration
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.slam import SlamSession
 
 FORMAT_NAME = "cogmap-session"
 FORMAT_VERSION = 1

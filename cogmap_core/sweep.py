@@ -50,7 +50,8 @@ from cogmap_core.compiled_replay import replay
 from cogmap_core.config import MapParams, validate_parameter
 from cogmap_core.errors import ParameterError
 from cogmap_core.evaluation import LAYOUT_RADIUS
-from cogmap_core.slam import EventLog, optimisation_summary
+from cogmap_core.event_log import EventLog
+from cogmap_core.slam import optimisation_summary
 
 PARAMETER_NAMES: tuple[str, ...] = tuple(f.name for f in fields(MapParams))
 """Every sweepable parameter, in :class:`MapParams` order."""

@@ -26,8 +26,8 @@ from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError
 from cogmap_core.event_file import events_to_columns, load_event_file
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
-from cogmap_core.slam import EventLog
 from tests.conftest import DATA
 
 pytestmark = pytest.mark.skipif(
@@ -286,7 +286,7 @@ def test_without_numba_installed_rebuilds_use_the_python_code() -> None:
     code = (
         "import sys; sys.modules['numba'] = None\n"  # import numba raises ImportError
         "from cogmap_core import compiled_replay as c\n"
-        "from cogmap_core.slam import EventLog\n"
+        "from cogmap_core.event_log import EventLog\n"
         "from cogmap_core.event_file import load_event_file\n"
         "from app.server.rebuild import BuildTask, build_map\n"
         "from cogmap_core.cognitive_map import MapMode\n"

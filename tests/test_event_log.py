@@ -11,8 +11,8 @@ import pytest
 
 from cogmap_core.errors import InputFileError
 from cogmap_core.event_file import load_event_file, save_event_file
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
-from cogmap_core.slam import EventLog
 
 FRAMES: list[tuple[list[MapEvent], float, tuple[float, float, float] | None]] = [
     ([Odometry(0.0, 0.0, 0.0), CreateVertex(0.0, 0, 0)], 0.0, (0.0, 0.0, 0.0)),

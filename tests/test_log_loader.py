@@ -13,17 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cogmap_core.datasets.odometry_csv import read_odometry_csv
-from cogmap_core.datasets.tuc import read_tuc
 from cogmap_core.errors import InputFileError
 from cogmap_core.events import LinkToVertex
 from cogmap_core.sources.detect import detect_format, open_source
+from cogmap_core.sources.odometry_csv import read_odometry_csv
 from cogmap_core.sources.odometry_log import (
     LogFormatError,
     LogReader,
     LogSourceConfig,
     log_steps,
 )
+from cogmap_core.sources.tuc import read_tuc
 from tests.test_odometry_log import LOOPS, events_of, odom_lines, write
 
 BOM = b"\xef\xbb\xbf"

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cogmap_core.datasets.odometry_csv import LOOP_FORMAT, ODOMETRY_FORMAT
-from cogmap_core.datasets.odometry_csv import TRUTH_FORMAT as CSV_TRUTH_FORMAT
-from cogmap_core.datasets.tuc import INPUT_FORMAT, TRUTH_FORMAT, read_tuc
 from cogmap_core.sources import log_text
 from cogmap_core.sources.log_text import BOM, LineFormat, LogFormatError, Rows, read_rows
+from cogmap_core.sources.odometry_csv import LOOP_FORMAT, ODOMETRY_FORMAT
+from cogmap_core.sources.odometry_csv import TRUTH_FORMAT as CSV_TRUTH_FORMAT
+from cogmap_core.sources.tuc import INPUT_FORMAT, TRUTH_FORMAT, read_tuc
 
 
 class Reference(LineFormat):

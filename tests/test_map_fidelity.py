@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.event_file import load_event_file
-from cogmap_core.slam import EventLog
+from cogmap_core.event_log import EventLog
 from tests.conftest import DATA
 
 RECORDINGS = ["figure_eight_3laps", "junction_dead_end_2laps"]

@@ -9,11 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cogmap_core.datasets.odometry_csv import read_odometry_csv
-from cogmap_core.datasets.tuc import looks_like_tuc, read_tuc
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
 from cogmap_core.sources.detect import LogOptions, detect_format, open_source
+from cogmap_core.sources.odometry_csv import read_odometry_csv
 from cogmap_core.sources.odometry_log import (
     LogFormatError,
     LogReader,
@@ -21,6 +20,7 @@ from cogmap_core.sources.odometry_log import (
     label_loop_candidates,
     log_steps,
 )
+from cogmap_core.sources.tuc import looks_like_tuc, read_tuc
 
 DT = 0.125  # s between odometry samples (exact in binary, so step sums are exact)
 

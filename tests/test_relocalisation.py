@@ -10,8 +10,8 @@ import pytest
 from cogmap_core.cognitive_map import CognitiveMap
 from cogmap_core.config import MapParams
 from cogmap_core.event_file import load_event_file
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import LinkToVertex, SetCurrentVertex
-from cogmap_core.slam import EventLog
 from tests.test_scene_integration import LAP, SquareLoop
 
 NO_GATE = {"gate_position": 1e9, "gate_heading": 1e9}  # accept every relocalisation

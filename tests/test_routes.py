@@ -13,6 +13,7 @@ from app.cli import main
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.event_file import load_event_file
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry
 from cogmap_core.g2o import write_g2o
 from cogmap_core.map_graph import MapSnapshot
@@ -26,7 +27,6 @@ from cogmap_core.routes import (
     shortest_route,
     true_path_graph,
 )
-from cogmap_core.slam import EventLog
 from tests.conftest import DATA
 
 SQRT2 = math.sqrt(2.0)

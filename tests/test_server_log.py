@@ -17,8 +17,9 @@ from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.event_log import EventLog
 from cogmap_core.session_file import SessionMeta
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.slam import SlamSession
 from cogmap_core.sources import detect
 from cogmap_core.sources.detect import open_source
 from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS

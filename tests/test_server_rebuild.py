@@ -29,8 +29,9 @@ from app.server.rebuild import (
 from cogmap_core.clustering import LoopClosureClusterer
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import LinkToVertex, MapEvent, Odometry
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
 from tests.test_server_support import assert_same_map, running_app
 

@@ -20,6 +20,7 @@ from cogmap_core.datasets import MazeConfig, generate_maze_bag, open_bag
 from cogmap_core.datasets.bag_writer import IratBagWriter
 from cogmap_core.datasets.generator import START_STAMP_NS, plan_dataset
 from cogmap_core.datasets.profile import frontend_config_for, profile_path
+from cogmap_core.event_log import EventLog
 from cogmap_core.frontend import FrontEnd
 from cogmap_core.frontend.local_view import LocalViewCells
 from cogmap_core.frontend.pose_cells import PoseCellExperiences, PoseCellNetwork
@@ -35,7 +36,7 @@ from cogmap_core.session_file import (
     same_state,
     save_session,
 )
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.slam import SlamSession
 from tests.test_event_log import rewrite_npz
 from tests.test_server_support import assert_same_map, counter, running_app
 

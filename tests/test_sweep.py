@@ -32,7 +32,7 @@ from cogmap_core.datasets import BagTopics, MazeConfig, generate_maze_bag
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.event_file import load_event_file
-from cogmap_core.slam import EventLog
+from cogmap_core.event_log import EventLog
 from cogmap_core.sweep import (
     FIGURE_COLUMNS,
     SettingFigures,
@@ -414,7 +414,8 @@ def test_a_failing_cell_is_recorded_and_the_sweep_goes_on(tmp_path: Path, in_pro
 def test_a_finished_sweep_resumes_without_loading_the_events(
     tmp_path: Path, in_process_client, monkeypatch: pytest.MonkeyPatch
 ):
-    import app.sweep
+    import app.sweep.cells
+    import app.sweep.events
 
     source = bag_source(RECORDED, None, BagTopics())
     options = SweepOptions(spec=sweep_spec({"delta": "3,6"}))
@@ -428,7 +429,8 @@ def test_a_finished_sweep_resumes_without_loading_the_events(
     def refuse(path: Path) -> None:
         raise AssertionError(f"a finished sweep loaded {path}")
 
-    monkeypatch.setattr(app.sweep, "load_event_file", refuse)
+    monkeypatch.setattr(app.sweep.events, "load_event_file", refuse)
+    monkeypatch.setattr(app.sweep.cells, "load_event_file", refuse)
     said: list[str] = []
     again = Sweep([source], out, options, say=said.append).run()  # no cluster needed either
     assert (again.computed, again.skipped, again.failed) == (0, 3, 0)
@@ -447,7 +449,8 @@ def test_a_finished_sweep_resumes_without_loading_the_events(
         loaded.append(Path(path))
         return load_event_file(path)
 
-    monkeypatch.setattr(app.sweep, "load_event_file", counting)
+    monkeypatch.setattr(app.sweep.events, "load_event_file", counting)
+    monkeypatch.setattr(app.sweep.cells, "load_event_file", counting)
     assert Sweep([source], out, options).run().computed == 0
     assert loaded == [out / "events" / source.events_name]
     assert json.loads((out / "sweep.json").read_text())["bags"] == [record]

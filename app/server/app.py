@@ -91,9 +91,10 @@ from cogmap_core.datasets import BagTopics, open_bag
 from cogmap_core.datasets.cache import cache_dir
 from cogmap_core.errors import CogmapError
 from cogmap_core.event_file import KIND_LINK
+from cogmap_core.event_log import EventLog
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
-from cogmap_core.slam import ALL_MODES, EventLog, SlamSession
+from cogmap_core.slam import ALL_MODES, SlamSession
 from cogmap_core.sources.detect import KINDS, CameraOptions, LogOptions, Source, open_source
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]

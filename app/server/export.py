@@ -1,7 +1,7 @@
 """Exports of the web app: map as g2o, summary.json, sizes.csv, a self-contained HTML replay.
 
-The summary and sizes are those of ``cogmap run`` (:func:`app.pipeline.session_summary`,
-:func:`app.pipeline.write_sizes_csv`) for the frames replayed so far. The HTML replay is made by
+The summary and sizes are those of ``cogmap run`` (:func:`app.summary.session_summary`,
+:func:`app.summary.write_sizes_csv`) for the frames replayed so far. The HTML replay is made by
 replaying the cached front-end events into fresh maps on a private viser server whose scene
 serializer records the incremental updates (with pauses between key frames); the resulting page
 plays the map growing, with optimisations, with no server behind it.
@@ -26,20 +26,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from app.pipeline import read_warnings, session_summary, source_description, write_sizes_csv
 from app.server.access import AccessPolicy, guarded_server
+from app.server.assets import read_asset
 from app.server.figures import judge_links, map_false_edges, truth_transform
 from app.server.files import REPLAY_MARKER, is_cogmap_replay
 from app.server.scene import MapExtras, SceneStreamer
 from app.server.view import PLAN_FOV
+from app.summary import read_warnings, session_summary, source_description, write_sizes_csv
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import InputFileError
 from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import MapEvent, Odometry
 from cogmap_core.fileio import check_writable, output_error, write_text_atomic
 from cogmap_core.g2o import format_g2o
-from cogmap_core.slam import EventLog, SlamSession
+from cogmap_core.slam import SlamSession
 
 if TYPE_CHECKING:
     from app.server.replay import Replay
@@ -169,8 +171,6 @@ def replay_caption(
     static_dir: Path | None = None,
 ) -> str:
     """The caption of an exported replay (``static/replay-caption.html`` filled in)."""
-    from app.server.assets import read_asset
-
     template = read_asset("replay-caption.html", static_dir)
     if not template:
         return ""

@@ -6,7 +6,7 @@ a false link -- one definition for the page, ``summary.json`` and the HTML repla
 (:func:`~cogmap_core.slam.map_false_loop_edges`).
 
 All are computed from the session's event log (ground truth per frame) and a map, the same way
-``cogmap run``'s report computes them (:class:`~cogmap_core.slam.EventLog`).
+``cogmap run``'s report computes them (:class:`~cogmap_core.event_log.EventLog`).
 """
 
 from __future__ import annotations
@@ -26,8 +26,9 @@ from cogmap_core.evaluation import (
     loop_edge_links,
     map_accuracy,
 )
+from cogmap_core.event_log import EventLog
 from cogmap_core.map_graph import MapSnapshot
-from cogmap_core.slam import EventLog, link_resolution
+from cogmap_core.slam import link_resolution
 
 FloatArray = NDArray[np.float64]
 #: Loop-closure edges of a map, each as ``(time, end vertex)``.
@@ -74,7 +75,7 @@ class MapFigures:
 
 @dataclass(frozen=True, slots=True)
 class LinkJudgement:
-    """Every link of a log (:meth:`~cogmap_core.slam.EventLog.link_table` order) and its verdict.
+    """Every link of a log (:meth:`~cogmap_core.event_log.EventLog.link_table` order), judged.
 
     Attributes:
         time: per link, its data time.

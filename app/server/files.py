@@ -37,12 +37,12 @@ from pathlib import Path
 
 from cogmap_core.datasets.cache import cache_dir
 from cogmap_core.datasets.image_folder import IMAGE_SUFFIXES
-from cogmap_core.datasets.odometry_csv import looks_like_csv
-from cogmap_core.datasets.tuc import INPUT_FIELDS
 from cogmap_core.datasets.video_reader import VIDEO_SUFFIXES
 from cogmap_core.errors import InputFileError, OutputError
 from cogmap_core.fileio import check_writable, output_error
 from cogmap_core.sources.log_text import BOM
+from cogmap_core.sources.odometry_csv import looks_like_csv
+from cogmap_core.sources.tuc import INPUT_FIELDS
 
 #: What an exported replay starts with (in its ``<head>``); a file in the way without it is
 #: never replaced.

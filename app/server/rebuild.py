@@ -45,8 +45,8 @@ from cogmap_core import compiled_replay
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_file import KIND_LINK
+from cogmap_core.event_log import EventLog
 from cogmap_core.events import MapEvent
-from cogmap_core.slam import EventLog
 
 #: Events applied between two checks for a newer request during a rebuild.
 REBUILD_CHUNK = 1000

@@ -9,7 +9,7 @@ each viewer can show or hide it (:mod:`app.server.view` shadows these frames per
   closures by cluster id over neutral sequential edges, every edge by creation time, or by its
   error -- the whitened residual the optimiser sees);
 - ``false_loops`` -- the loop-closure edges made from links the ground truth calls false
-  (:meth:`~cogmap_core.slam.EventLog.loop_closure_score`), drawn over the others;
+  (:meth:`~cogmap_core.event_log.EventLog.loop_closure_score`), drawn over the others;
 - ``truth/aligned/cNNNN`` -- the ground-truth path, placed by the frame ``truth/aligned`` with the
   rigid transform that aligns the truth to the map (the one the ATE uses): a good map lies on it;
 - ``odometry/cNNNN`` -- the dead-reckoned path (odometry alone), in the map's own frame;

@@ -24,7 +24,7 @@ import threading
 import time
 import warnings
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import viser
@@ -72,7 +72,11 @@ from cogmap_core.config import MapParams
 from cogmap_core.map_graph import MapSnapshot
 
 if TYPE_CHECKING:
-    from app.server.app import CogmapApp
+    from contextlib import AbstractContextManager
+
+    from app.server.replay import Replay
+    from app.server.routes import RouteWorker
+    from app.server.scene import SceneStreamer
 
 MODE_NAMES: tuple[str, ...] = tuple(m.value for m in MapMode)
 COLOURING_LABELS: dict[str, str] = {
@@ -183,10 +187,43 @@ class Pick:
     summary: str = ""  # one line, written beside it in the scene
 
 
+class ViewHost(Protocol):
+    """What a tab's view uses of the app that made it (:class:`~app.server.app.CogmapApp`).
+
+    The shared state it reads (the server, the replay, the streamed scene and its lock, the
+    route worker), the page's shared folders its controls go into, and the four things it asks
+    of the app: that the views changed, a pick on the maps, a map's figures, a cluster log.
+    """
+
+    server: viser.ViserServer
+    replay: Replay
+    streamer: SceneStreamer
+    scene_lock: AbstractContextManager[Any]
+    stats_version: int
+    routes: RouteWorker[ClientView]
+    view_folder: viser.GuiFolderHandle
+    inspect_folder: viser.GuiFolderHandle
+    route_folder: viser.GuiFolderHandle
+    compare_folder: viser.GuiFolderHandle
+    clusters_folder: viser.GuiFolderHandle
+
+    def views_changed(self) -> None:
+        """Stream what the views show (a view changed); the shown maps rebuild first."""
+
+    def pick(self, view: ClientView, point: NDArray[np.float64], tolerance: float) -> Pick | None:
+        """The vertex or edge of the view's maps nearest to ``point`` (world x, y)."""
+
+    def map_figures(self, mode: MapMode, cmap: CognitiveMap) -> dict[str, str]:
+        """A map's figures as the page writes them."""
+
+    def cluster_log_html(self, mode: MapMode, cmap: CognitiveMap) -> str:
+        """The cluster colour legend and the optimisation log of one map (a view's)."""
+
+
 class ClientView:
     """The view of one browser tab (module doc)."""
 
-    def __init__(self, app: CogmapApp, client: viser.ClientHandle) -> None:
+    def __init__(self, app: ViewHost, client: viser.ClientHandle) -> None:
         """Build the tab's controls and shadows, and frame its camera."""
         self.app = app
         self.client = client

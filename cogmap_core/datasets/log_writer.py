@@ -3,10 +3,10 @@
 - **TUC**: ``PREFIX_Input.txt`` (all ``odom2 time vx vy yaw_rate cov_vx cov_vy cov_yaw_rate``
   lines, then the ``loop time matched_time score`` lines, as the dataset's files are laid out)
   and ``PREFIX_GT.txt`` (``point2 time x y 0 0 0 0`` lines, then ``angle time theta 0``);
-  :func:`~cogmap_core.datasets.tuc.read_tuc` finds the ground truth beside the input.
+  :func:`~cogmap_core.sources.tuc.read_tuc` finds the ground truth beside the input.
 - **CSV**: ``PREFIX_odometry.csv`` (``time,v,omega``), ``PREFIX_loops.csv``
   (``time,matched_time,score``) and ``PREFIX_ground_truth.csv`` (``time,x,y,theta``), each with
-  a header line; :func:`~cogmap_core.datasets.odometry_csv.read_odometry_csv` finds the
+  a header line; :func:`~cogmap_core.sources.odometry_csv.read_odometry_csv` finds the
   companions.
 
 Numbers are written in the shortest form that reads back to the same float, so a reader

@@ -24,22 +24,22 @@ from pathlib import Path
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.camera_common import CAMERA_ONLY_MAP_CHANGES, CameraReader
 from cogmap_core.datasets.image_folder import image_files, open_image_folder
-from cogmap_core.datasets.odometry_csv import looks_like_csv, read_odometry_csv
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.datasets.rosbag_reader import BagReader, open_bag
 from cogmap_core.datasets.topics import BagTopics
-from cogmap_core.datasets.tuc import looks_like_tuc, read_tuc
 from cogmap_core.datasets.video_reader import VIDEO_SUFFIXES, open_video
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.evaluation import EvaluationSettings
 from cogmap_core.frontend.config import FrontEndConfig
 from cogmap_core.sources.log_text import BOM
+from cogmap_core.sources.odometry_csv import looks_like_csv, read_odometry_csv
 from cogmap_core.sources.odometry_log import (
     LOG_EVALUATION,
     LOG_MAP_PARAMS,
     LogReader,
     LogSourceConfig,
 )
+from cogmap_core.sources.tuc import looks_like_tuc, read_tuc
 
 FORMATS = ("bag", "video", "images", "tuc", "csv")
 BAG_SUFFIXES = (".bag", ".mcap", ".db3")

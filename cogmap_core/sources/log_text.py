@@ -1,6 +1,6 @@
 r"""Log text files read into arrays: fast, in bounded memory, with every value's line number.
 
-The readers of :mod:`cogmap_core.datasets.tuc` and :mod:`cogmap_core.datasets.odometry_csv`
+The readers of :mod:`cogmap_core.sources.tuc` and :mod:`cogmap_core.sources.odometry_csv`
 describe their lines with a :class:`LineFormat`; :func:`read_rows` reads a file of them into one
 :class:`Rows` per kind of line: a float64 array of the numbers kept and an int array of the line
 each row came from (``file:line`` text is made only for a message).

@@ -5,8 +5,8 @@ records two streams: velocities ``(time, v, omega)`` and loop candidates ``(time
 score)`` -- "the view at ``time`` looks like the view at ``matched time``, with this similarity".
 This module turns such a log into the event stream of :mod:`cogmap_core.events`, the same
 contract the RatSLAM front end fulfils, so the three maps, the report and the web app work on it
-unchanged. Readers of concrete formats (:mod:`cogmap_core.datasets.tuc`,
-:mod:`cogmap_core.datasets.odometry_csv`) produce an :class:`OdometryLog`; :func:`log_steps` makes
+unchanged. Readers of concrete formats (:mod:`cogmap_core.sources.tuc`,
+:mod:`cogmap_core.sources.odometry_csv`) produce an :class:`OdometryLog`; :func:`log_steps` makes
 the events; :class:`LogReader` serves them like a bag reader serves frames.
 
 **Time.** Data time counts from the first odometry sample (the file's stamps minus that one).
