@@ -474,6 +474,23 @@ def test_cli_route_on_a_report_folder(tmp_path, capsys):
     assert out["edges"] == 4
     assert out["points"] == [[1.0, 2.5], [round(1 + INSET, 6), round(INSET, 6)], [3.0, 0.0]]
     assert out["map"] == str(folder / "compact.g2o")
+    # a report folder's own map parameters (config.json): straightened within 0.1 m
+    config = {"dataset": "x.bag", "map": MapParams(link_sigma_position=0.1).to_dict()}
+    (folder / "config.json").write_text(json.dumps(config))
+    assert main(["route", str(folder), "--from", "1.1,2.3", "--to", "2.8,0.3"]) == 0
+    inset = round(0.1 / SQRT2, 6)
+    assert json.loads(capsys.readouterr().out)["points"][1] == [round(1 + 0.1 / SQRT2, 6), inset]
+    # a g2o file given directly, a negative coordinate written with "="
+    assert main(["route", str(folder / "compact.g2o"), "--from=-0.2,0", "--to", "3,0"]) == 0
+    assert json.loads(capsys.readouterr().out)["vertices"] == [0, 1, 2, 3]
+
+
+def test_cli_route_bad_report_configuration_is_one_line(tmp_path, capsys):
+    folder = write_map(tmp_path)
+    (folder / "config.json").write_text(json.dumps({"map": {"integration_radius": -1}}))
+    assert main(["route", str(folder), "--from", "0,0", "--to", "3,0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "config.json: integration_radius" in err[0], err
 
 
 @pytest.mark.parametrize(
