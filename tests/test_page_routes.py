@@ -26,7 +26,7 @@ from app.server.view import ROUTE_HELP, ClientView
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import RigidTransform2D
-from cogmap_core.routes import RouteMap, true_path_graph
+from cogmap_core.routes import Route, RouteMap, true_path_graph
 from tests import test_server_support as support
 from tests.test_routes import snapshot
 from tests.test_server_support import client, running_app, until, wait
@@ -177,6 +177,29 @@ def test_without_truth_or_alignments_the_frames_are_one_and_there_is_no_true_pat
     both = route_inputs(maps, {MapMode.COMPACT: (0.5, 1.0, -2.0),
                                MapMode.STANDARD: (-1.2, -3.0, 0.5)}, TRUTH, (1,))  # type: ignore[arg-type]  # fmt: skip
     assert both.alignments == {MapMode.COMPACT: TO_COMPACT, MapMode.STANDARD: TO_STANDARD}
+
+
+def test_routes_on_the_page_take_the_maps_parameters() -> None:
+    start = Place(MapMode.COMPACT, tuple(TO_COMPACT.apply(CORNERS[:1])[0]))
+    goal = Place(MapMode.COMPACT, tuple(TO_COMPACT.apply(CORNERS[4:])[0]))
+
+    def route(params: MapParams | None) -> Route:  # the compact map's route with params
+        inputs = route_inputs(_maps(), {}, None, (), params)  # type: ignore[arg-type]
+        assert inputs.params is params
+        found = plan_routes(inputs, start, goal, (MapMode.COMPACT,)).legs[0].route
+        assert found is not None
+        return found
+
+    # straightened within 0.1 m (link_sigma_position): the corner cut 0.1 m each way
+    inset = 0.1 / np.sqrt(2.0)
+    way = np.array([[0.0, 0.0], [2.0 - inset, inset], [2.0, 1.0]])
+    wide = route(MapParams(link_sigma_position=0.1))
+    np.testing.assert_allclose(wide.points, TO_COMPACT.apply(way), atol=1e-12)
+    # joined within 1.2 m (integration_radius): from (1, 0) straight to (2, 0.5)
+    assert route(MapParams(integration_radius=1.2)).vertex_ids.tolist() == [0, 1, 3, 4]
+    # without parameters, the defaults
+    assert route(None).vertex_ids.tolist() == [0, 1, 2, 3, 4]
+    assert route(None).length == pytest.approx(L_LENGTH, abs=1e-12)
 
 
 def test_the_worker_does_the_latest_request_once() -> None:
