@@ -2,7 +2,10 @@
 
 MAP is a report folder of ``cogmap run`` (its ``<map>.g2o``, the compact map unless ``--map``
 says) or any 2D g2o file. Places are in the map's frame (the g2o file's: the robot starts at the
-origin facing +x); each is snapped to its nearest vertex (:mod:`cogmap_core.routes`).
+origin facing +x); each is snapped to its nearest vertex (:mod:`cogmap_core.routes`). Vertices
+within the map's ``integration_radius`` are joined and the way is straightened within its
+``link_sigma_position``: a report folder's map parameters (its ``config.json``), the defaults
+for a g2o file.
 """
 
 from __future__ import annotations
@@ -12,7 +15,9 @@ import json
 from pathlib import Path
 
 from cogmap_core.cognitive_map import MapMode
-from cogmap_core.errors import InputFileError
+from cogmap_core.config import MapParams
+from cogmap_core.errors import CogmapError, InputFileError
+from cogmap_core.fileio import read_json
 from cogmap_core.g2o import read_g2o
 from cogmap_core.routes import Route, RouteMap
 
@@ -44,6 +49,21 @@ def map_file(path: Path, mode: str) -> Path:
     return candidate
 
 
+def map_params(path: Path) -> MapParams:
+    """The map parameters of a report folder (its ``config.json``); the defaults otherwise."""
+    config = path / "config.json"
+    if not (path.is_dir() and config.is_file()):
+        return MapParams()
+    data = read_json(config, "report configuration", InputFileError)
+    values = data.get("map") if isinstance(data, dict) else None
+    if not isinstance(values, dict):
+        raise InputFileError(f"{config}: no 'map' parameters in this report configuration")
+    try:
+        return MapParams.from_dict(values)
+    except (CogmapError, TypeError) as exc:
+        raise InputFileError(f"{config}: {exc}") from None
+
+
 def route_json(
     source: Path, route: Route, start: tuple[float, float], goal: tuple[float, float]
 ) -> str:
@@ -65,7 +85,8 @@ def route_json(
 
 def _run(args: argparse.Namespace) -> int:
     source = map_file(Path(args.map), args.which)
-    routes = RouteMap.of(read_g2o(source), args.weight)
+    params = map_params(Path(args.map))
+    routes = RouteMap.of(read_g2o(source), args.weight, params)
     route = routes.route(args.start, args.goal)
     print(route_json(source, route, args.start, args.goal))
     return 0
@@ -78,8 +99,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         help="the shortest route between two places on a saved map; print one JSON line",
         description="Find the shortest route between two places on a map saved by cogmap run "
         "(a report folder: its <map>.g2o) or any 2D g2o file: Dijkstra over the map's edges "
-        "weighted by their length in the saved (optimised) poses, each place snapped to its "
-        "nearest vertex. Prints "
+        "weighted by their length in the saved (optimised) poses and over joins of vertices "
+        "within the map's integration_radius, each place snapped to its nearest vertex, the way "
+        "straightened within the map's link_sigma_position of the vertices (a report folder's "
+        "parameters, from its config.json; the defaults for a g2o file). Prints "
         '{"map", "from", "to", "length_m", "edges", "start_gap_m", "goal_gap_m", "vertices", '
         '"points"}. Places are X,Y in metres in the map\'s frame (the robot starts at the origin '
         "facing +x); write a negative first number as --from=-1.5,2.",

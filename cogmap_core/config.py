@@ -57,7 +57,8 @@ class MapParams:
         short_edge_threshold: after optimisation, edges shorter than this are contracted.
         integration_radius: scene integration merges a revisit run only when each of its
             vertices lies within this distance of an edge of known ground
-            (:mod:`~cogmap_core.scene_integration`).
+            (:mod:`~cogmap_core.scene_integration`). Routes take two vertices this close for
+            one place and join them (:mod:`~cogmap_core.routes`).
         integration_max_residual: ... and the run's closing loop-closure link agrees with the
             map: its residual, weighed as the optimiser weighs it, is at most this.
         integration_min_age: known ground is what the map had at least this many seconds
@@ -78,7 +79,8 @@ class MapParams:
         link_sigma_position: with the noise model, the position precision of a loop-closure
             link (standard deviation, m): how well the front end places the robot at the place
             it recognised. Loop closures keep unit weight and odometry is weighed relative to
-            them, so the Huber scale reads in metres of loop-closure error.
+            them, so the Huber scale reads in metres of loop-closure error. Routes are
+            straightened within this distance of their vertices (:mod:`~cogmap_core.routes`).
         link_sigma_heading: ... and its heading precision (rad).
         loop_model: how the batch optimisation judges loop closures
             (:data:`~cogmap_core.robust.LOOP_MODELS`): 0 the paper's Huber loss on every

@@ -24,8 +24,9 @@ from app.server.routes import (
 )
 from app.server.view import ROUTE_HELP, ClientView
 from cogmap_core.cognitive_map import MapMode
+from cogmap_core.config import MapParams
 from cogmap_core.evaluation import RigidTransform2D
-from cogmap_core.routes import RouteMap, true_path_graph
+from cogmap_core.routes import Route, RouteMap, true_path_graph
 from tests import test_server_support as support
 from tests.test_routes import snapshot
 from tests.test_server_support import client, running_app, until, wait
@@ -41,6 +42,11 @@ CORNERS = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [2.0, 0.5], [2.0, 1.0]])
 CHAIN = [(0, 1), (1, 2), (2, 3), (3, 4)]
 TO_COMPACT = RigidTransform2D(0.5, 1.0, -2.0)  # truth -> compact map
 TO_STANDARD = RigidTransform2D(-1.2, -3.0, 0.5)  # truth -> standard map
+# a map's route from the L's first vertex to its last: straightened inside the corner (2, 0) by
+# the default link_sigma_position, each way
+_INSET = MapParams().link_sigma_position / np.sqrt(2.0)
+L_WAY = np.array([[0.0, 0.0], [2.0 - _INSET, _INSET], [2.0, 1.0]])
+L_LENGTH = float(np.hypot(*np.diff(L_WAY, axis=0).T).sum())  # 2.958 m
 
 
 def _maps() -> dict[MapMode, object]:
@@ -89,8 +95,8 @@ def test_routes_on_each_map_and_the_true_path_from_places_clicked_on_one_map() -
     assert standard is not None and standard.route is not None
     np.testing.assert_array_equal(compact.route.vertex_ids, [0, 1, 2, 3, 4])
     np.testing.assert_array_equal(standard.route.vertex_ids, [10, 11, 12, 13, 14])
-    assert compact.route.length == pytest.approx(3.0, abs=1e-12)
-    assert standard.route.length == pytest.approx(3.0, abs=1e-12)
+    assert compact.route.length == pytest.approx(L_LENGTH, abs=1e-12)
+    assert standard.route.length == pytest.approx(L_LENGTH, abs=1e-12)
     assert compact.route.start_gap == pytest.approx(0.1, abs=1e-12)
     assert standard.route.goal_gap == pytest.approx(0.1, abs=1e-12)
     # the true shortest path: samples (0.1, 0) .. (2, 0.9) along the L: 1.9 + 0.9 m
@@ -103,7 +109,7 @@ def test_routes_on_each_map_and_the_true_path_from_places_clicked_on_one_map() -
     # drawn on the compact map: the standard route and the true path lie where the compact
     # map's alignment puts them
     np.testing.assert_allclose(
-        plan.points_on(standard, MapMode.COMPACT), TO_COMPACT.apply(CORNERS), atol=1e-12
+        plan.points_on(standard, MapMode.COMPACT), TO_COMPACT.apply(L_WAY), atol=1e-12
     )
     np.testing.assert_allclose(
         plan.points_on(plan.truth, MapMode.COMPACT),
@@ -112,9 +118,9 @@ def test_routes_on_each_map_and_the_true_path_from_places_clicked_on_one_map() -
     )
     # the panel: each length and its ratio to the true shortest path
     text = plan_html(plan, MapMode.COMPACT)
-    assert 'id="cogmap-route-compact-length">3.00 m<' in text
-    assert 'id="cogmap-route-compact-ratio">1.071<' in text  # 3.0 / 2.8
-    assert 'id="cogmap-route-standard-length">3.00 m<' in text
+    assert 'id="cogmap-route-compact-length">2.96 m<' in text
+    assert 'id="cogmap-route-compact-ratio">1.056<' in text  # 2.958 / 2.8
+    assert 'id="cogmap-route-standard-length">2.96 m<' in text
     assert 'id="cogmap-route-truth-length">2.80 m<' in text
     assert 'id="cogmap-route-truth-ratio">1.000<' in text
     assert "compact (shown)" in text and "cogmap-error" not in text
@@ -133,12 +139,12 @@ def test_an_unreachable_goal_is_one_line_on_the_page_and_the_other_routes_stay()
         "no route on the compact map: no route from vertex 0 to vertex 4: they lie on "
         "separate pieces of the map (no chain of edges joins them)"
     )
-    assert plan.leg(MapMode.STANDARD).route.length == pytest.approx(3.0)  # type: ignore[union-attr]
+    assert plan.leg(MapMode.STANDARD).route.length == pytest.approx(L_LENGTH)  # type: ignore[union-attr]
     text = plan_html(plan, MapMode.COMPACT)
     assert 'class="cogmap-note cogmap-error" id="cogmap-route"' in text
     assert "no route on the compact map: no route from vertex 0 to vertex 4" in text
     assert 'id="cogmap-route-compact-length">–<' in text
-    assert 'id="cogmap-route-standard-length">3.00 m<' in text
+    assert 'id="cogmap-route-standard-length">2.96 m<' in text
     # an empty map says so too
     one = snapshot(np.zeros((1, 2)), [])
     maps[MapMode.COMPACT] = replace(
@@ -164,13 +170,36 @@ def test_without_truth_or_alignments_the_frames_are_one_and_there_is_no_true_pat
     start = Place(MapMode.COMPACT, tuple(maps[MapMode.COMPACT].poses[0, :2]))  # type: ignore[attr-defined]
     goal = Place(MapMode.COMPACT, tuple(maps[MapMode.COMPACT].poses[4, :2]))  # type: ignore[attr-defined]
     plan = plan_routes(none, start, goal, (MapMode.COMPACT,))
-    assert plan.truth is None and plan.legs[0].route.length == pytest.approx(3.0)  # type: ignore[union-attr]
+    assert plan.truth is None and plan.legs[0].route.length == pytest.approx(L_LENGTH)  # type: ignore[union-attr]
     text = plan_html(plan, MapMode.COMPACT)
     assert 'id="cogmap-route-compact-ratio">–<' in text and "cogmap-route-truth" not in text
     assert "No ground truth: the maps&#x27; frames are taken as one." in text
     both = route_inputs(maps, {MapMode.COMPACT: (0.5, 1.0, -2.0),
                                MapMode.STANDARD: (-1.2, -3.0, 0.5)}, TRUTH, (1,))  # type: ignore[arg-type]  # fmt: skip
     assert both.alignments == {MapMode.COMPACT: TO_COMPACT, MapMode.STANDARD: TO_STANDARD}
+
+
+def test_routes_on_the_page_take_the_maps_parameters() -> None:
+    start = Place(MapMode.COMPACT, tuple(TO_COMPACT.apply(CORNERS[:1])[0]))
+    goal = Place(MapMode.COMPACT, tuple(TO_COMPACT.apply(CORNERS[4:])[0]))
+
+    def route(params: MapParams | None) -> Route:  # the compact map's route with params
+        inputs = route_inputs(_maps(), {}, None, (), params)  # type: ignore[arg-type]
+        assert inputs.params is params
+        found = plan_routes(inputs, start, goal, (MapMode.COMPACT,)).legs[0].route
+        assert found is not None
+        return found
+
+    # straightened within 0.1 m (link_sigma_position): the corner cut 0.1 m each way
+    inset = 0.1 / np.sqrt(2.0)
+    way = np.array([[0.0, 0.0], [2.0 - inset, inset], [2.0, 1.0]])
+    wide = route(MapParams(link_sigma_position=0.1))
+    np.testing.assert_allclose(wide.points, TO_COMPACT.apply(way), atol=1e-12)
+    # joined within 1.2 m (integration_radius): from (1, 0) straight to (2, 0.5)
+    assert route(MapParams(integration_radius=1.2)).vertex_ids.tolist() == [0, 1, 3, 4]
+    # without parameters, the defaults
+    assert route(None).vertex_ids.tolist() == [0, 1, 2, 3, 4]
+    assert route(None).length == pytest.approx(L_LENGTH, abs=1e-12)
 
 
 def test_the_worker_does_the_latest_request_once() -> None:
@@ -202,8 +231,8 @@ def _expected(app: object, mode: MapMode, start: Place, goal: Place) -> tuple[fl
     to_truth = RigidTransform2D(*figures[start.mode].truth_transform).inverse()
     to_map = RigidTransform2D(*figures[mode].truth_transform)
     a, b = to_truth.apply(np.array([start.xy, goal.xy]))
-    snap = app.replay.session.maps[mode].snapshot()  # type: ignore[attr-defined]
-    length = RouteMap.of(snap).route(*to_map.apply(np.array([a, b]))).length
+    cmap = app.replay.session.maps[mode]  # type: ignore[attr-defined]
+    length = RouteMap.of(cmap.snapshot(), params=cmap.params).route(*to_map.apply([a, b])).length
     truth = np.asarray(app.replay.session.log.ground_truth)  # type: ignore[attr-defined]
     return length, true_path_graph(truth).route(a, b).length
 
@@ -287,11 +316,15 @@ def test_route_side_by_side_a_click_on_the_second_map_and_a_map_in_two_pieces(
         # each shown map has its own route and the true path; the standard map's is its own
         assert "/map/compact/route/own_fill" in scene and "/map/standard/route/own_fill" in scene
         assert "/map/standard/route/standard_fill" not in scene
-        # a map in two pieces: the compact map with the goal's vertex cut off (no edge)
+        # a map in two pieces: the compact map with the goal's vertex cut off -- no edge to
+        # any vertex within 0.3 m of it, so that no join (0.1 m) reaches the rest either
         cmap = app.replay.session.maps[MapMode.COMPACT]
         whole = cmap.snapshot()
         goal_id = int(route.vertex_ids[-1])
-        keep = (whole.edge_from != goal_id) & (whole.edge_to != goal_id)
+        goal_xy = whole.poses[whole.vertex_ids == goal_id, :2][0]
+        near = whole.vertex_ids[np.hypot(*(whole.poses[:, :2] - goal_xy).T) < 0.3]
+        assert int(route.vertex_ids[0]) not in near
+        keep = ~np.isin(whole.edge_from, near) & ~np.isin(whole.edge_to, near)
         pieces = snapshot(
             whole.poses,
             np.column_stack([whole.edge_from[keep], whole.edge_to[keep]]),

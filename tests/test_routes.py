@@ -1,5 +1,6 @@
-"""Routes on a map (cogmap_core.routes): exact answers on hand-made maps, the true-path graph,
-the on-path share, a recorded event stream and ``cogmap route``."""
+"""Routes on a map (cogmap_core.routes): exact answers on hand-made maps (the search over the
+edges, the joins of near vertices, the straightened way), the true-path graph, the on-path
+share, a recorded event stream and ``cogmap route``."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 
 from app.cli import main
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.config import MapParams
 from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.event_file import load_event_file
 from cogmap_core.event_log import EventLog
@@ -25,12 +27,20 @@ from cogmap_core.routes import (
     on_path_share,
     segments_on_path,
     shortest_route,
+    straighten,
     true_path_graph,
 )
 from tests.conftest import DATA
 
 SQRT2 = math.sqrt(2.0)
 CORNER_CUT = (SQRT2 - 1) * TRUE_PATH_JOIN_RADIUS  # the most a join shortens a right-angle turn
+CORRIDOR = MapParams().link_sigma_position  # a route's way strays this far from its vertices
+INSET = CORRIDOR / SQRT2  # ... so it turns a right angle this far inside the corner, each way
+
+
+def plain(source, weight="poses") -> RouteMap:
+    """The route map of the edges alone: routes through the vertices, no joins, not straightened."""
+    return RouteMap.of(source, weight, join_radius=0.0, corridor=0.0)
 
 
 def snapshot(poses, edges, rel=None, ids=None) -> MapSnapshot:
@@ -66,7 +76,7 @@ SQUARE_EDGES = [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2)]
 
 
 def test_square_with_a_diagonal_takes_the_diagonal():
-    routes = RouteMap.of(snapshot(SQUARE, SQUARE_EDGES))
+    routes = plain(snapshot(SQUARE, SQUARE_EDGES))
     route = routes.route_between(0, 2)
     assert route.vertex_ids.tolist() == [0, 2]
     assert route.length == pytest.approx(SQRT2, abs=1e-12)
@@ -83,7 +93,7 @@ def test_square_with_a_diagonal_takes_the_diagonal():
 
 
 def test_square_without_its_diagonal_goes_round():
-    routes = RouteMap.of(snapshot(SQUARE, SQUARE_EDGES[:4]))
+    routes = plain(snapshot(SQUARE, SQUARE_EDGES[:4]))
     route = routes.route_between(0, 2)
     assert route.length == pytest.approx(2.0, abs=1e-12)
     assert route.vertex_ids.tolist() in ([0, 1, 2], [0, 3, 2])
@@ -106,7 +116,7 @@ def test_dead_end_is_entered_and_left_the_same_way():
     # a corridor 0-1-2-3 along x with a dead end 1-4-5 going up from 1
     poses = [(0, 0), (1, 0), (2, 0), (3, 0), (1, 1), (1, 2.5)]
     edges = [(0, 1), (1, 2), (2, 3), (1, 4), (4, 5)]
-    routes = RouteMap.of(snapshot(poses, edges))
+    routes = plain(snapshot(poses, edges))
     route = routes.route_between(5, 3)
     assert route.vertex_ids.tolist() == [5, 4, 1, 2, 3]
     assert route.length == pytest.approx(1.5 + 1 + 2, abs=1e-12)
@@ -117,6 +127,14 @@ def test_dead_end_is_entered_and_left_the_same_way():
     assert by_place.vertex_ids.tolist() == [5, 4, 1, 2, 3]
     assert by_place.start_gap == pytest.approx(math.hypot(0.1, 0.2))
     assert by_place.goal_gap == pytest.approx(math.hypot(0.2, 0.3))
+    # straightened (the default): the same vertices, the way inside the corner at vertex 1
+    straight = RouteMap.of(snapshot(poses, edges)).route((1.1, 2.3), (2.8, 0.3))
+    assert straight.vertex_ids.tolist() == [5, 4, 1, 2, 3]
+    np.testing.assert_allclose(straight.points, [[1, 2.5], [1 + INSET, INSET], [3, 0]], atol=1e-12)
+    assert straight.length == pytest.approx(
+        math.hypot(INSET, 2.5 - INSET) + math.hypot(2 - INSET, INSET), abs=1e-12
+    )
+    assert straight.goal_gap == by_place.goal_gap
 
 
 def test_snapping_to_the_nearest_vertex():
@@ -194,11 +212,122 @@ def test_a_cognitive_map_and_its_snapshot_route_alike():
     assert cmap.num_edges == 4
     from_map = shortest_route(cmap, (0.0, 0.0), (1.0, 1.0))
     from_snapshot = shortest_route(cmap.snapshot(), (0.0, 0.0), (1.0, 1.0))
-    assert from_map.length == pytest.approx(2.0, abs=1e-9)
+    # round a corner of the square (either one), straightened inside it
+    assert from_map.length == pytest.approx(2 * math.hypot(1 - INSET, INSET), abs=1e-9)
     assert from_map.vertex_ids.tolist() == from_snapshot.vertex_ids.tolist()
     assert from_map.length == from_snapshot.length
     # 3 -> 0 over the loop closure: one edge
     assert RouteMap.of(cmap).route_between(3, 0).vertex_ids.tolist() == [3, 0]
+
+
+# a corridor driven there (0..5 along y = 0) and back 6 cm to its side (6..11 along y = 0.06),
+# vertices 0.3 m apart, the two strands joined only where the robot turned at the far end: view
+# matching does not recognise a place seen facing the other way
+THERE = [(0.3 * k, 0.0) for k in range(6)]
+BACK = [(1.5 - 0.3 * k, 0.06) for k in range(6)]
+BOTH_WAYS = [(k, k + 1) for k in range(11)]
+
+
+def test_joins_let_a_route_cross_between_a_corridor_s_strands():
+    snap = snapshot(THERE + BACK, BOTH_WAYS)
+    # over the edges alone, from 1 (0.3, 0) to 9 (0.6, 0.06): to the far end and back
+    assert plain(snap).route_between(1, 9).length == pytest.approx(1.2 + 0.06 + 0.9, abs=1e-12)
+    # vertices within the integration radius (0.1 m) are joined: the six pairs 6 cm apart
+    joined = RouteMap.of(snap, corridor=0.0)
+    assert joined.join_radius == MapParams().integration_radius == 0.1
+    assert joined.num_joins == 6
+    assert joined.num_edges == 11 + 5  # the far end's pair 5-6 had its edge already
+    route = joined.route_between(1, 9)
+    assert route.vertex_ids.tolist() in ([1, 2, 9], [1, 10, 9])  # along, then across, or so
+    assert route.length == pytest.approx(0.3 + 0.06, abs=1e-12)
+    assert route.num_edges == 2
+    # straightened too (the default): inside the turn of either way, by the same length
+    straight = RouteMap.of(snap).route_between(1, 9)
+    assert straight.vertex_ids.tolist() == route.vertex_ids.tolist()
+    assert straight.length == pytest.approx(
+        math.hypot(0.3 - INSET, INSET) + math.hypot(INSET, 0.06 - INSET), abs=1e-12
+    )
+    assert RouteMap.of(snap).lengths([1, 0], [9, 9]).tolist() == pytest.approx(
+        [straight.length, RouteMap.of(snap).route_between(0, 9).length], abs=1e-12
+    )
+
+
+def test_joins_never_reach_across_a_wall():
+    # two corridors on either side of a 0.1 m wall (centre lines 0.4 m apart), joined round
+    # the wall's end at x = 1.5
+    there = [(0.3 * k, 0.0) for k in range(6)]
+    beyond = [(1.5 - 0.3 * k, 0.4) for k in range(6)]
+    snap = snapshot(there + beyond, [(k, k + 1) for k in range(11)])
+    routes = RouteMap.of(snap)
+    assert routes.num_joins == 0
+    route = routes.route_between(0, 11)
+    assert route.vertex_ids.tolist() == list(range(12))
+    # round the wall's end, inside both corners
+    np.testing.assert_allclose(
+        route.points,
+        [[0, 0], [1.5 - INSET, INSET], [1.5 - INSET, 0.4 - INSET], [0, 0.4]],
+        atol=1e-12,
+    )
+    assert route.length == pytest.approx(
+        2 * math.hypot(1.5 - INSET, INSET) + 0.4 - 2 * INSET, abs=1e-12
+    )
+    # a join radius wider than the wall would cut through it
+    assert RouteMap.of(snap, join_radius=0.45).route_between(0, 11).length == pytest.approx(0.4)
+
+
+def test_the_join_radius_and_corridor_are_the_map_s_own_parameters():
+    params = MapParams(integration_radius=0.2, link_sigma_position=0.05)
+    cmap = CognitiveMap(MapMode.COMPACT, params)
+    assert (RouteMap.of(cmap).join_radius, RouteMap.of(cmap).corridor) == (0.2, 0.05)
+    snap = snapshot(SQUARE, SQUARE_EDGES)  # a snapshot or a pose graph: the defaults
+    assert (RouteMap.of(snap).join_radius, RouteMap.of(snap).corridor) == (0.1, 0.03)
+    assert RouteMap.of(snap, params=params).corridor == 0.05
+    # measured weights: joins (weighed in the poses), the way not straightened
+    measured = RouteMap.of(snap, "measured")
+    assert (measured.join_radius, measured.corridor) == (0.1, 0.0)
+    with pytest.raises(ParameterError, match="straightened only when its length is measured"):
+        RouteMap([0, 1], [(0, 0), (1, 0)], [0], [1], weights=[1.0], corridor=0.03)
+    for bad in (-0.1, math.nan, math.inf):
+        with pytest.raises(ParameterError, match="join radius must be a distance of 0 or more"):
+            RouteMap([0, 1], [(0, 0), (1, 0)], [0], [1], join_radius=bad)
+        with pytest.raises(ParameterError, match="corridor must be a distance of 0 or more"):
+            RouteMap([0, 1], [(0, 0), (1, 0)], [0], [1], corridor=bad)
+
+
+def test_straighten_cuts_inside_a_corner_by_the_corridor():
+    c = 0.05 / SQRT2  # the gate at the corner lies on its bisector, 0.05 m each way
+    # turning left, then turning right: the way bends at the gate's inner end
+    left = straighten(np.array([(0, 0), (1, 0), (1, 1)], float), 0.05)
+    np.testing.assert_allclose(left, [[0, 0], [1 - c, c], [1, 1]], atol=1e-15)
+    right = straighten(np.array([(0, 0), (1, 0), (1, -1)], float), 0.05)
+    np.testing.assert_allclose(right, [[0, 0], [1 - c, -c], [1, -1]], atol=1e-15)
+    # a straight run through gates across it: one segment; 0 gives the polyline back
+    run = np.array([(0, 0), (1, 0), (2, 0.0)])
+    np.testing.assert_array_equal(straighten(run, 0.05), [[0, 0], [2, 0]])
+    np.testing.assert_array_equal(straighten(run, 0.0), run)
+    np.testing.assert_array_equal(straighten(run[:2], 0.05), run[:2])
+    # repeated points (two vertices at one place) are passed once
+    np.testing.assert_array_equal(straighten(np.array([(0, 0), (1, 0), (1, 0), (2, 0)]), 0.05),
+                                  [[0, 0], [2, 0]])  # fmt: skip
+    with pytest.raises(ParameterError, match="corridor must be a distance of 0 or more"):
+        straighten(run, -0.01)
+
+
+def test_straighten_keeps_within_the_corridor_of_a_zigzag():
+    # vertices 2 cm either side of a line: the gates (3 cm) leave a way 1 cm off the line
+    x = np.linspace(0, 3, 13)
+    zigzag = np.column_stack([x, 0.02 * (-1.0) ** np.arange(13)])
+    np.testing.assert_allclose(
+        straighten(zigzag, 0.03), [[0, 0.02], [0.25, 0.01], [2.75, 0.01], [3, 0.02]], atol=1e-15
+    )
+    # within 5 cm the line through the first and last vertex fits: straight
+    np.testing.assert_allclose(straighten(zigzag, 0.05), [[0, 0.02], [3, 0.02]], atol=1e-15)
+    # a polyline folding back on itself reaches to within the corridor of its turn
+    np.testing.assert_allclose(
+        straighten(np.array([(0, 0), (1, 0), (0, 0)], float), 0.03),
+        [[0, 0], [0.97, 0], [0, 0]],
+        atol=1e-15,
+    )
 
 
 def line(a, b, step=0.01):
@@ -291,7 +420,8 @@ def figure_eight():
 def test_compact_route_on_a_recorded_stream_is_the_true_shortest_path(figure_eight, start, goal):
     """3 laps of the figure eight, the compact map: its route between two places (given in the
     ground truth's frame, taken into the map's) is within 2 % of the true shortest path along the
-    driven path between the places of its two end vertices, and lies on that path."""
+    driven path between the places of its two end vertices, straightened as the route is (the
+    driven path rounds its own turns), no longer than that path itself, and lies on it."""
     log, cmap = figure_eight
     snap = cmap.snapshot()
     alignment = log.map_accuracy(snap).alignment
@@ -309,7 +439,9 @@ def test_compact_route_on_a_recorded_stream_is_the_true_shortest_path(figure_eig
     reference = true_paths.route_between(
         true_paths.snap(points[0])[0], true_paths.snap(points[-1])[0]
     )
-    assert route.length == pytest.approx(reference.length, rel=0.02)
+    straight = straighten(reference.points, CORRIDOR)
+    assert route.length == pytest.approx(np.hypot(*np.diff(straight, axis=0).T).sum(), rel=0.02)
+    assert route.length <= reference.length
     assert on_path_share(points, truth, 0.08) >= 0.99
 
 
@@ -335,13 +467,30 @@ def test_cli_route_on_a_report_folder(tmp_path, capsys):
     assert main(["route", str(folder), "--from", "1.1,2.3", "--to", "2.8,0.3"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["vertices"] == [5, 4, 1, 2, 3]
-    assert out["length_m"] == pytest.approx(4.5)
+    # the way straightened inside the corner at vertex 1 (the default link_sigma_position)
+    assert out["length_m"] == round(
+        math.hypot(INSET, 2.5 - INSET) + math.hypot(2 - INSET, INSET), 6
+    )
     assert out["edges"] == 4
-    assert out["points"][0] == [1.0, 2.5]
+    assert out["points"] == [[1.0, 2.5], [round(1 + INSET, 6), round(INSET, 6)], [3.0, 0.0]]
     assert out["map"] == str(folder / "compact.g2o")
+    # a report folder's own map parameters (config.json): straightened within 0.1 m
+    config = {"dataset": "x.bag", "map": MapParams(link_sigma_position=0.1).to_dict()}
+    (folder / "config.json").write_text(json.dumps(config))
+    assert main(["route", str(folder), "--from", "1.1,2.3", "--to", "2.8,0.3"]) == 0
+    inset = round(0.1 / SQRT2, 6)
+    assert json.loads(capsys.readouterr().out)["points"][1] == [round(1 + 0.1 / SQRT2, 6), inset]
     # a g2o file given directly, a negative coordinate written with "="
     assert main(["route", str(folder / "compact.g2o"), "--from=-0.2,0", "--to", "3,0"]) == 0
     assert json.loads(capsys.readouterr().out)["vertices"] == [0, 1, 2, 3]
+
+
+def test_cli_route_bad_report_configuration_is_one_line(tmp_path, capsys):
+    folder = write_map(tmp_path)
+    (folder / "config.json").write_text(json.dumps({"map": {"integration_radius": -1}}))
+    assert main(["route", str(folder), "--from", "0,0", "--to", "3,0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "config.json: integration_radius" in err[0], err
 
 
 @pytest.mark.parametrize(

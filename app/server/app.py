@@ -1066,6 +1066,7 @@ class CogmapApp:
         with self.replay.lock:
             maps = self.replay.session.maps
             snapshots = {mode: maps[mode].snapshot() for mode in modes}
+            params = maps[modes[0]].params  # one set for all the maps of a session
             transforms = {
                 mode: None if (f := self._figures.get(mode)) is None else f.truth_transform
                 for mode in modes
@@ -1078,7 +1079,7 @@ class CogmapApp:
                 truth = np.array(log_.ground_truth[:count, :2])
                 key = (id(log_), count)
         try:
-            inputs = route_inputs(snapshots, transforms, truth, key)
+            inputs = route_inputs(snapshots, transforms, truth, key, params)
             graph = None
             if inputs.truth is not None:
                 graph = self._truth_graphs.get(inputs.truth, inputs.truth_key)

@@ -5,8 +5,9 @@ shows, for that viewer only:
 
 - the route on each **shown map** (and on the **standard map**, the reference every compact
   map is compared with): Dijkstra over the map's live edges, weighted by their length in the
-  map's current poses, each place snapped to the map's nearest vertex
-  (:class:`cogmap_core.routes.RouteMap`);
+  map's current poses, and over joins of its vertices within ``integration_radius``, each place
+  snapped to the map's nearest vertex, the way straightened within ``link_sigma_position`` of
+  the vertices (:class:`cogmap_core.routes.RouteMap`, with the maps' parameters);
 - with ground truth, the **true shortest path** between the two places along the driven
   ground-truth path so far (:func:`cogmap_core.routes.true_path_graph`);
 - their lengths side by side, each map's route as a multiple of the true shortest path.
@@ -40,6 +41,7 @@ from numpy.typing import NDArray
 
 from app.palette import GROUND_TRUTH_COLOR, INK, MAP_COLORS, css
 from cogmap_core.cognitive_map import MapMode
+from cogmap_core.config import MapParams
 from cogmap_core.errors import CogmapError
 from cogmap_core.evaluation import RigidTransform2D
 from cogmap_core.map_graph import MapSnapshot
@@ -79,6 +81,7 @@ class RouteInputs:
         truth: ``(M, 2+)`` the driven ground-truth path so far (truth frame), or None.
         truth_key: what identifies ``truth`` (a cached true-path graph is reused for the same).
         note: why the maps' frames are taken as one, when they are.
+        params: the maps' parameters (their join radius and corridor); None: the defaults.
 
     """
 
@@ -87,6 +90,7 @@ class RouteInputs:
     truth: FloatArray | None
     truth_key: tuple[int, ...] = ()
     note: str = ""
+    params: MapParams | None = None
 
 
 def carry(
@@ -179,7 +183,7 @@ def plan_routes(
         a = carry(start.xy, start.mode, mode, alignments)[0]
         b = carry(goal.xy, goal.mode, mode, alignments)[0]
         try:
-            route = RouteMap.of(snap).route(a, b)
+            route = RouteMap.of(snap, params=inputs.params).route(a, b)
         except NoRouteError as exc:
             legs.append(Leg(mode, None, f"no route on the {mode.value} map: {exc}"))
             continue
@@ -297,7 +301,9 @@ def plan_html(plan: RoutePlan, shown: MapMode) -> str:
     note = (
         f'<div class="cogmap-note" id="cogmap-route-note">{html.escape(how)} snap: how far the '
         "start / goal lie from the vertex each was snapped to. Edge lengths are the distances "
-        "between their ends' current (optimised) poses.</div>"
+        "between their ends' current (optimised) poses; vertices within the map's integration "
+        "radius are joined (edges counts the joins taken), and each way is straightened within "
+        "the map's link sigma (position) of its vertices.</div>"
     )
     return head + table + note
 
@@ -363,15 +369,22 @@ def route_inputs(
     transforms: dict[MapMode, tuple[float, float, float] | None],
     truth: FloatArray | None,
     truth_key: tuple[int, ...],
+    params: MapParams | None = None,
 ) -> RouteInputs:
     """Inputs of :func:`plan_routes` from the scene's alignments ``(theta, tx, ty)`` per map.
 
     The truth is used only when every map routed on has its alignment (the figures compute
     them about once a second); otherwise the frames are taken as one, and the note says why.
+    ``params``: the maps' parameters (None: the defaults).
     """
     if truth is None or not len(truth):
         return RouteInputs(
-            snapshots, None, None, (), "No ground truth: the maps' frames are taken as one."
+            snapshots,
+            None,
+            None,
+            (),
+            "No ground truth: the maps' frames are taken as one.",
+            params,
         )
     if any(transforms.get(mode) is None for mode in snapshots):
         return RouteInputs(
@@ -381,13 +394,14 @@ def route_inputs(
             (),
             "The maps' alignments to the ground truth are not computed yet (they follow within "
             "a second): the maps' frames are taken as one, without the true path.",
+            params,
         )
     alignments = {
         mode: RigidTransform2D(*transform)  # type: ignore[misc]
         for mode, transform in transforms.items()
         if transform is not None and mode in snapshots
     }
-    return RouteInputs(snapshots, alignments, truth, truth_key)
+    return RouteInputs(snapshots, alignments, truth, truth_key, params=params)
 
 
 def nearest_map(
