@@ -18,9 +18,11 @@ edges just removed) -- when
 
 1. ``start`` and ``end`` are known ground for the whole run (at least ``integration_min_age``
    older than its first vertex; neither belongs to the run);
-2. the closing link agrees with the map: its residual, weighed as the optimiser weighs it, is at
-   most ``integration_max_residual`` (an edge the optimisation could not satisfy is no
-   evidence); and
+2. the links that bracket the run agree with the map: their residuals, weighed as the
+   optimiser weighs them, are at most ``integration_max_residual`` (an edge the optimisation
+   could not satisfy is no evidence). That is the closing link, and, when a link alone
+   re-localised the robot where the run began (below), that link too: a false match that
+   opened a run says nothing about where its vertices belong; and
 3. every vertex of the run lies within ``integration_radius`` of an edge of known ground (an
    edge whose vertices are at least ``integration_min_age`` older than the run): the run
    re-walked mapped corridors.
@@ -40,8 +42,8 @@ was re-localised on, as it would have after a set-current event. For front ends 
 every link with set current (RatSLAM) this changes nothing: the run's first vertex then hangs
 off the re-localised vertex itself.
 
-**When.** A run is judged when it closes if its closing link already agrees with the map (2
-holds before any optimisation: the optimisation would not move it), otherwise after the next
+**When.** A run is judged when it closes if its links already agree with the map (2 holds
+before any optimisation: the optimisation would not move them), otherwise after the next
 batch optimisation -- the paper's order, which lets the optimisation decide where the run
 converges. Runs are judged one after the other against the map as the merges before left it;
 ``start`` and ``end`` are resolved to the vertices that absorbed them.
@@ -68,6 +70,8 @@ class RevisitRun:
     Attributes:
         start: vertex id the robot was at when the run began (or, when a link alone
             re-localised it there, the vertex that link joined it to).
+        opened_from: when a link alone re-localised the robot where the run began, the vertex
+            that link came from (its loop-closure edge joins it to ``start``); -1 otherwise.
         vertices: the vertices created, in order.
         created: data time of the first vertex.
         end: vertex id the robot re-localised on when the run closed (-1 while open).
@@ -78,6 +82,7 @@ class RevisitRun:
     """
 
     start: int
+    opened_from: int = -1
     vertices: list[int] = field(default_factory=list)
     created: float = 0.0
     end: int = -1
@@ -157,11 +162,11 @@ class SceneIntegration:
     def on_vertex(self, vertex: int, parent: int, time: float) -> None:
         """A vertex was added, joined by a sequential edge to ``parent``."""
         if self.open is None:
-            start = parent
+            start, opened_from = parent, -1
             at = self._relocalised_at
             if at is not None and at[0] == parent:
-                start = at[1]  # re-localised by a link without moving: start on that place
-            self.open = RevisitRun(start=start, created=time)
+                start, opened_from = at[1], parent  # re-localised by a link without moving
+            self.open = RevisitRun(start=start, opened_from=opened_from, created=time)
         self._relocalised_at = None
         self.open.vertices.append(vertex)
 
@@ -187,7 +192,7 @@ class SceneIntegration:
             return 0
         self.open = None
         run.end, run.closing, run.closed = end, closing, time
-        if _closing_residual(graph, run, params) > params.integration_max_residual:
+        if not _links_agree(graph, run, params):
             self.pending.append(run)  # let the optimisation decide
             return 0
         merged = self._judge(graph, run, params)
@@ -202,7 +207,7 @@ class SceneIntegration:
         runs, self.pending = self.pending, []
         merged = 0
         for run in runs:
-            if _closing_residual(graph, run, params) <= params.integration_max_residual:
+            if _links_agree(graph, run, params):
                 merged += max(self._judge(graph, run, params, final=True), 0)
         return merged
 
@@ -240,17 +245,42 @@ class SceneIntegration:
         return merged
 
 
-def _closing_residual(graph: MapGraph, run: RevisitRun, params: MapParams) -> float:
-    """Norm of the closing link's residual on the current poses, weighed as the optimiser does.
+def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:
+    """Whether the links that bracket the run agree with the map (condition 2, module doc)."""
+    limit = params.integration_max_residual
+    closing = _link_residual(graph, run.vertices[-1], run.end, run.closing, params)
+    if closing > limit:
+        return False
+    if run.opened_from < 0:
+        return True  # opened where the robot was set (or where it drove on from)
+    robot, place = graph.resolve(run.opened_from)[0], graph.resolve(run.start)[0]
+    k = graph.edge_between(robot, place)
+    if k < 0:
+        return True  # the opening link made no edge of its own (it duplicated one)
+    if graph.edge_from[k] != robot:
+        robot, place = place, robot
+    opening = tuple(graph.edge_rel[k].tolist())
+    return _link_residual(graph, robot, place, opening, params) <= limit
 
-    In metres of loop-closure error: with the noise model, heading counts with the ratio of a
-    loop closure's position and heading precision (:mod:`~cogmap_core.edge_noise`).
+
+def _link_residual(
+    graph: MapGraph,
+    robot: int,
+    place: int,
+    measured: tuple[float, float, float],
+    params: MapParams,
+) -> float:
+    """Norm of a link's residual on the current poses, weighed as the optimiser does.
+
+    ``measured`` is the pose of ``place`` in the frame of ``robot`` (vertex ids, aliases
+    resolved). In metres of loop-closure error: with the noise model, heading counts with the
+    ratio of a loop closure's position and heading precision (:mod:`~cogmap_core.edge_noise`).
     """
-    place = graph.pose_of(run.end)
-    predicted = compose_scalar(graph.pose_of(run.vertices[-1]), run.closing)
-    dx, dy = predicted[0] - place[0], predicted[1] - place[1]
+    at = graph.pose_of(place)
+    predicted = compose_scalar(graph.pose_of(robot), measured)
+    dx, dy = predicted[0] - at[0], predicted[1] - at[1]
     weight = link_heading_weight(params.link_sigmas())
-    return math.sqrt(dx * dx + dy * dy + (weight * wrap_scalar(predicted[2] - place[2])) ** 2)
+    return math.sqrt(dx * dx + dy * dy + (weight * wrap_scalar(predicted[2] - at[2])) ** 2)
 
 
 def _merge(graph: MapGraph, removed: int, kept: int) -> None:

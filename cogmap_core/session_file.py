@@ -299,6 +299,7 @@ def _save_lists(arrays: Arrays, prefix: str, lists: list[list[int]]) -> None:
 def _run_json(run: RevisitRun) -> Json:
     return {
         "start": run.start,
+        "opened_from": run.opened_from,
         "vertices": list(run.vertices),
         "created": run.created,
         "end": run.end,
@@ -610,6 +611,7 @@ def _load_lists(arrays: Arrays, prefix: str) -> list[list[int]]:
 def _run_from_json(s: Json) -> RevisitRun:
     return RevisitRun(
         start=int(s["start"]),
+        opened_from=int(s.get("opened_from", -1)),  # (absent from sessions saved before it)
         vertices=[int(v) for v in s["vertices"]],
         created=float(s["created"]),
         end=int(s["end"]),

@@ -174,6 +174,40 @@ def test_revisits_recognised_by_links_alone_are_integrated():
         assert np.hypot(*offset[:2]) <= 0.5 * STEP + 1e-9
 
 
+def links_alone_lap(false_at: int | None = None) -> SquareLoop:
+    """Lap 2 of a front end that links without moving the robot: a new vertex every 4 steps,
+    the place recognised every 8. ``false_at``: that lap position's link names the place half a
+    lap back instead (across the square, a false match)."""
+    loop = SquareLoop()
+    loop.first_lap()
+    for _ in range(LAP):
+        position = loop.step % LAP
+        if position % 4 == 2:
+            loop.new.append(loop.s.create())
+        if position % 8 == 0:
+            named = (position - LAP // 2) % LAP if position == false_at else position
+            loop.s.link(loop.first[named])
+        loop.advance()
+    loop.s.link(loop.first[0])
+    return loop
+
+
+def test_a_run_opened_by_a_rejected_link_is_not_integrated():
+    """The link that re-localised the robot where a run began must agree with the map too.
+
+    The link at lap position 48, (0.6, 1), names position 8, (0.4, 0): the optimisation
+    rejects it. It closes the run before it (positions 42 and 46: its closing link disagrees)
+    and opens the run after it (50 and 54, closed by the true link at 56): both stay, however
+    well the true link that closes the second agrees.
+    """
+    loop = links_alone_lap(false_at=48)
+    cmap = build("scene_integration", loop.s, **NO_GATE)
+    kept = set(alive(cmap))
+    assert [v for v in loop.new if v in kept] == loop.new[10:14]  # positions 42 to 54
+    assert set(loop.first) <= kept
+    assert int(cmap.rejected_loop_edges().sum()) == 1
+
+
 # ------------------------------------------------------------------------------------------
 # what is never removed
 # ------------------------------------------------------------------------------------------
