@@ -31,6 +31,7 @@ import viser
 from numpy.typing import NDArray
 
 from app.server.figures import FalseEdges, false_link_label, layout_radius_label
+from app.server.map_layer import LAYERS
 from app.server.params import ALL_SLIDERS, format_value
 from app.server.routes import (
     OWN_WIDTH,
@@ -46,20 +47,21 @@ from app.server.routes import (
     plan_html,
 )
 from app.server.scene import (
-    COLOURINGS,
-    ERROR_RAMP_CSS,
-    ERROR_SCALE_MAX,
     FALSE_LOOP_COLOR,
     GROUND_TRUTH_COLOR,
-    LAYERS,
     MAP_COLORS,
     ODOMETRY_COLOR,
     PINNED_COLOR,
     SELECTION_COLOR,
-    TIME_RAMP_CSS,
-    Box,
     Grid,
     cluster_color,
+)
+from app.server.scene_style import (
+    COLOURINGS,
+    ERROR_RAMP_CSS,
+    ERROR_SCALE_MAX,
+    TIME_RAMP_CSS,
+    Box,
     edge_error,
     edge_segments,
     grid_spacing,
