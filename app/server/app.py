@@ -33,6 +33,7 @@ import viser
 import viser.uplot
 from numpy.typing import NDArray
 
+from app.inputs import BagSource, InputOptions, ReplayInput
 from app.server.assets import head_html, help_markdown
 from app.server.chart import SIZE_SERIES, chart_data, chart_options, chart_series, x_end, y_top
 from app.server.export import (
@@ -70,7 +71,7 @@ from app.server.params import (
     typed_check,
 )
 from app.server.rebuild import make_builder
-from app.server.replay import BagSource, FrontEndSource, PlaybackState, Replay
+from app.server.replay import PlaybackState, Replay
 from app.server.routes import RouteWorker, TruthGraphs, plan_routes, route_inputs, route_problem
 from app.server.scene import MapExtras, SceneStreamer, cluster_color
 from app.server.validation import (
@@ -87,7 +88,7 @@ from app.server.validation import (
 from app.server.view import ClientView, Pick, nearest_pick, swatch
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagTopics, open_bag
+from cogmap_core.datasets import open_bag
 from cogmap_core.datasets.cache import cache_dir
 from cogmap_core.errors import CogmapError
 from cogmap_core.event_file import KIND_LINK
@@ -95,7 +96,7 @@ from cogmap_core.event_log import EventLog
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, SlamSession
-from cogmap_core.sources.detect import KINDS, CameraOptions, LogOptions, Source, open_source
+from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -179,19 +180,19 @@ class CogmapApp:
         server: the viser server to build the page on.
         bag: the bag (or a function generating the built-in one).
         params: initial map parameters (the paper's by default).
-        frontend: front-end configuration or a function of the bag choosing it (default: the
-            bag's profile, as ``cogmap run``).
+        input_options: how inputs are read (:class:`~app.inputs.InputOptions`: the kind of
+            ``bag`` -- None: detected from the content --, the front end or a function of the
+            bag choosing it -- default: the bag's profile, as ``cogmap run`` --, a bag's topics
+            and JPEG scale, how to read a log, a camera's odometry and frame rate). Another
+            input opened from the page is read alike (its own kind, a log with default
+            options).
         speed: initial playback speed.
         autoplay: start playing as soon as the bag is open.
         static_dir: folder of the page's assets.
         scene_hz: maximum map updates per second during playback.
-        image_scale: JPEG decode reduction (1, 2, 4, 8).
-        topics: the bag's topic names.
         rebuild_workers: worker processes that rebuild maps after a parameter change
             (:mod:`app.server.rebuild`; 0: on the replay's thread).
         wait_for_viewer: with ``autoplay``, start playing when the first browser connects.
-        fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
-        log: how to read a log (ignored for bags).
         defaults: what "reset" returns to (default: the paper's values; for logs, the
             defaults of that kind of input).
         resume: a loaded session to show and continue on the bag (see :class:`Replay`); its
@@ -207,26 +208,22 @@ class CogmapApp:
         self,
         server: viser.ViserServer,
         bag: BagSource,
+        *,
         params: MapParams | None = None,
-        frontend: FrontEndSource = None,
+        input_options: InputOptions | None = None,
         speed: float = 1.0,
         autoplay: bool = True,
         static_dir: Path | None = None,
         scene_hz: float = 10.0,
-        image_scale: int = 1,
-        topics: BagTopics | None = None,
         rebuild_workers: int = 2,
         wait_for_viewer: bool = False,
-        fmt: str | None = None,
-        log: LogOptions | None = None,
         defaults: MapParams | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
         export_dir: Path | None = None,
         data_dirs: Sequence[Path] | None = None,
-        camera: CameraOptions | None = None,
     ) -> None:
         """Build the page; call :meth:`start` to begin the replay."""
-        self._camera = camera  # a camera input's odometry and frame rate (issue 26)
+        self.input_options = input_options or InputOptions()
         self.defaults = defaults or MapParams()
         self.exports = ExportFolder(export_dir if export_dir is not None else default_export_dir())
         if data_dirs is None:
@@ -267,9 +264,6 @@ class CogmapApp:
         self._typed: dict[str, tuple[str, str]] = {}  # box -> (normal text, message)
         self._default_modes: tuple[MapMode, ...] = (MapMode.COMPACT,)
         self.views: dict[int, ClientView] = {}
-        self._frontend = frontend
-        self._topics = topics
-        self._image_scale = image_scale
         self._workers = rebuild_workers
         self._autoplay = autoplay
         self._waiting_for_viewer = autoplay and wait_for_viewer
@@ -288,7 +282,11 @@ class CogmapApp:
         self.routes: RouteWorker[ClientView] = RouteWorker(self._route_work)
         self.started_at = time.monotonic()
         self.replay = self._make_replay(
-            bag, params, speed, autoplay and not wait_for_viewer, fmt=fmt, log=log, resume=resume
+            ReplayInput(bag, self.input_options),
+            params,
+            speed,
+            autoplay and not wait_for_viewer,
+            resume=resume,
         )
         if resume is not None:
             params = resume[0].params
@@ -301,31 +299,23 @@ class CogmapApp:
 
     def _make_replay(
         self,
-        bag: BagSource,
+        source: ReplayInput,
         params: MapParams | None,
         speed: float,
         autoplay: bool,
-        fmt: str | None = None,
-        log: LogOptions | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
         opened: Source | None = None,
     ) -> Replay:
         return Replay(
-            bag,
+            source,
             self,
             params=params,
-            frontend=self._frontend,
             speed=speed,
             autoplay=autoplay,
-            image_scale=self._image_scale,
-            topics=self._topics,
             builder=make_builder(self._workers),
-            fmt=fmt,
-            log=log,
             resume=resume,
             lock=self._replay_lock,
             opened=opened,
-            camera=self._camera,
         )
 
     def _reset_label(self) -> str:
@@ -1564,17 +1554,19 @@ class CogmapApp:
         reader = None
         # opened once here, to refuse it before the running replay stops (the reader names what
         # is wrong: neither a ROS 1 bag nor a ROS 2 bag, ...), then handed over to the new replay
-        log_options = LogOptions()
+        options = self.input_options
         try:
             chosen = self.data.check(chosen)
             if chosen.kind == "bag":
-                reader = open_bag(chosen.path, topics=self._topics, image_scale=self._image_scale)
+                reader = open_bag(
+                    chosen.path, topics=options.topics, image_scale=options.image_scale
+                )
             elif KINDS[chosen.kind].has_camera:  # a video or image folder (serve's --fps)
                 reader = open_source(
-                    chosen.path, chosen.kind, camera=self.replay.camera_options_for(chosen.path)
+                    chosen.path, chosen.kind, camera=options.camera_for(chosen.path)
                 )
             else:  # a log: read (and checked) whole, as cogmap serve FILE reads it
-                reader = open_source(chosen.path, chosen.kind, log=log_options)
+                reader = open_source(chosen.path, chosen.kind, log=LogOptions())
             frames = reader.info.frame_count
             if frames == 0:
                 problem = (
@@ -1612,8 +1604,11 @@ class CogmapApp:
                 self._false_key = None
                 self._links = NO_LINKS
                 self._odometry_key = None
+                options = dataclasses.replace(
+                    self.input_options, format=chosen.kind, log=LogOptions()
+                )
                 self.replay = self._make_replay(  # (opened here: not sniffed again)
-                    path, params, speed, True, fmt=chosen.kind, log=log_options, opened=reader
+                    ReplayInput(path, options), params, speed, True, opened=reader
                 )
                 self.started_at = time.monotonic()
                 self.links_html.content = ""  # (a log's latest links)
