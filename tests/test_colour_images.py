@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from app.inputs import InputOptions
-from app.server.app import camera_rgb
+from app.server.panels.live_figures import camera_rgb
 from cogmap_core.datasets.bag_writer import IratBagWriter
 from cogmap_core.datasets.image_folder import open_image_folder, read_image
 from cogmap_core.datasets.jpeg import JpegDecoder, image_header

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import viser
 
+from app.server.panels.inspect import describe_edge
 from app.server.scene import (
     MAP_COLORS,
     VERTEX_FRACTION,
@@ -21,7 +22,6 @@ from app.server.scene import (
 )
 from app.server.scene_nodes import CHUNK
 from app.server.scene_style import LOOP_Z, SEQUENTIAL_Z, edge_error, edge_errors, edge_segments
-from app.server.view import describe_edge
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry
