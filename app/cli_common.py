@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from app.inputs import FrontEndSource, InputOptions
 from app.params_file import load_params_changes
 from cogmap_core.config import MapParams
 from cogmap_core.datasets.profile import read_frontend_profile
@@ -201,6 +202,23 @@ def camera_options_from_args(
 ) -> CameraOptions:
     """How to read a camera input: ``--odometry``, ``--fps`` and the front-end settings."""
     return CameraOptions(odometry=args.odometry, fps=args.fps, frontend=frontend)
+
+
+def input_options_from_args(
+    args: argparse.Namespace, kind: InputKind, frontend: FrontEndSource
+) -> InputOptions:
+    """How to read the input the command line names: its kind, ``frontend``, topics, log, camera.
+
+    A camera input is read with the default log options, a log with its own (``--frontend``
+    overrides of its settings, its companion files).
+    """
+    return InputOptions(
+        format=kind.name,
+        frontend=frontend,
+        topics=topics_from_args(args),
+        log=LogOptions() if kind.has_camera else log_options_from_args(args),
+        camera=camera_options_from_args(args),
+    )
 
 
 def log_options_from_args(args: argparse.Namespace) -> LogOptions:

@@ -15,18 +15,15 @@ from app.cli_common import (
     add_input_arguments,
     add_map_arguments,
     add_topic_arguments,
-    camera_options_from_args,
     frontend_from_args,
     input_kind,
-    log_options_from_args,
+    input_options_from_args,
     map_changes_from_args,
     resolve_bag,
-    topics_from_args,
 )
 from app.pipeline import RunOptions, run_headless
 from app.progress import ProgressBar
 from cogmap_core.errors import ParameterError
-from cogmap_core.sources.detect import LogOptions
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -35,20 +32,16 @@ def _run(args: argparse.Namespace) -> int:
         raise ParameterError("--resume needs a bag to continue on: cogmap run BAG --resume FILE")
     bag = resolve_bag(args.bag)
     kind = input_kind(args, bag)
-    camera = kind.has_camera
+    frontend = frontend_from_args(args, bag) if kind.has_camera else None
     options = RunOptions(
-        frontend=frontend_from_args(args, bag) if camera else None,
-        topics=topics_from_args(args),
+        input=input_options_from_args(args, kind, frontend),
         force=args.force,
-        format=kind.name,
-        log=log_options_from_args(args) if not camera else LogOptions(),
         on_clock_jump=args.on_clock_jump,
         until_error=args.until_error,
         resume=None if args.resume is None else Path(args.resume),
         param_changes=changes,
         save_session=None if args.save_session is None else Path(args.save_session),
         save_events=None if args.save_events is None else Path(args.save_events),
-        camera=camera_options_from_args(args),
     )
     bar = ProgressBar("cogmap run")
 

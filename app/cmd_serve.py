@@ -16,16 +16,14 @@ from app.cli_common import (
     add_input_arguments,
     add_map_arguments,
     add_topic_arguments,
-    camera_options_from_args,
     frontend_from_args,
     input_kind,
-    log_options_from_args,
+    input_options_from_args,
     map_changes_from_args,
-    topics_from_args,
 )
+from app.inputs import BagSource, GenerationProgress
 from app.server.access import page_url
 from app.server.files import default_export_dir
-from app.server.replay import BagSource, GenerationProgress
 from cogmap_core.datasets.cache import cache_dir
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.session_file import describe, resume_session
@@ -95,7 +93,6 @@ def _network_warning(host: str, port: int, token: str | None) -> str:
 
 def _serve(args: argparse.Namespace) -> int:
     changes = map_changes_from_args(args)  # read and validated once, before anything starts
-    topics = topics_from_args(args)
     companions = args.loops is not None or args.ground_truth is not None
     if args.bag is not None and (Path(args.bag).exists() or args.format != "auto" or companions):
         kind = input_kind(args, Path(args.bag))  # (a missing file with companions: an error)
@@ -105,9 +102,12 @@ def _serve(args: argparse.Namespace) -> int:
     params = kind.map_params.with_changes(**changes)
     if kind.has_camera:
         frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile)
-        log = None
-    else:
-        log = log_options_from_args(args)  # validates the log's --frontend settings
+    # (each input's front end its own: its profile, then --frontend; each camera input's visual
+    # odometry takes those settings too, InputOptions.camera_for; a log's --frontend settings
+    # are validated here)
+    input_options = input_options_from_args(
+        args, kind, lambda bag_path: frontend_from_args(args, bag_path)
+    )
     if not 0 < args.port < 65536:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
     resume = None
@@ -144,22 +144,16 @@ def _serve(args: argparse.Namespace) -> int:
         server,
         bag,
         params=params,
+        input_options=input_options,
         speed=args.speed,
         autoplay=not args.paused,
         static_dir=Path(args.static) if args.static else None,
-        frontend=lambda bag_path: frontend_from_args(args, bag_path),
-        topics=topics,
         rebuild_workers=min(2, os.cpu_count() or 1),
         wait_for_viewer=not args.no_wait,
-        fmt=kind.name,
-        log=log,
         defaults=kind.map_params,
         resume=resume,
         export_dir=export_dir,
         data_dirs=data_dirs,
-        # (each camera input's visual odometry takes its own front-end settings, --frontend
-        # overrides included: Replay.camera_options_for)
-        camera=camera_options_from_args(args),
     )
     folders = ", ".join(str(d) for d in data_dirs)
     print(

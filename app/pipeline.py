@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from app.inputs import InputOptions
 from app.report import ReportFolder
 from app.report_figures import map_figure, save_figure, size_figure
 from app.summary import (
@@ -32,21 +33,17 @@ from app.summary import (
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.datasets import BagReader, BagTopics
-from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.errors import CogmapError, InputFileError
 from cogmap_core.evaluation import LAYOUT_RADIUS
 from cogmap_core.event_file import save_event_file
 from cogmap_core.fileio import check_output_file, output_error
 from cogmap_core.frames import Frame
-from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.g2o import write_g2o
 from cogmap_core.session_file import SessionMeta, resume_session, save_session
 from cogmap_core.session_file import describe as session_description
 from cogmap_core.slam import SlamSession, map_false_loop_edge_mask
 from cogmap_core.sources.detect import (
     KINDS,
-    CameraOptions,
-    LogOptions,
     Source,
     check_sessions_allowed,
     open_source,
@@ -71,15 +68,13 @@ ProgressCallback = Callable[[int, int, float], None]
 
 @dataclass(frozen=True, slots=True)
 class RunOptions:
-    """Everything that defines a headless run besides the input (a bag or a log).
+    """Everything that defines a headless run besides the input's path (a bag or a log).
 
     Attributes:
-        frontend: front-end settings (None: iRat defaults + the bag's profile; unused for logs).
-        topics: the bag's topics (None: the iRat bag's).
-        image_scale: JPEG decode reduction.
+        input: how the input is read (:class:`~app.inputs.InputOptions`: its kind, the front
+            end -- None: iRat defaults + the bag's profile; unused for logs --, a bag's topics
+            and JPEG scale, how to read a log, a camera's motion).
         force: overwrite a non-empty report folder and an existing ``save_session`` file.
-        format: ``bag``, ``tuc`` or ``csv`` (None: detected from the content).
-        log: how to read a log (ignored for bags).
         on_clock_jump: a bag's clock jumping back: ``drop`` or ``stop`` (bags only).
         until_error: a bag corrupt part-way: map what comes before the damage (bags only).
         resume: continue the session saved in this file (its front end, maps and data time);
@@ -92,24 +87,17 @@ class RunOptions:
             only).
         save_events: write the map events of the run (the front end's, or a log's) to this
             event file at the end of the data, as ``cogmap sweep`` records and reads them.
-        camera: a camera input's motion (a bag's odometry topic or visual odometry) and the
-            frame rate of a video or image folder without a times file.
 
     """
 
-    frontend: FrontEndConfig | None = None  # None: iRat defaults + the bag's profile
-    topics: BagTopics | None = None
-    image_scale: int = 1
+    input: InputOptions = field(default_factory=InputOptions)
     force: bool = False
-    format: str | None = None  # bag, tuc, csv; None: detected from the content
-    log: LogOptions = field(default_factory=LogOptions)  # how to read a log
     on_clock_jump: str = "drop"  # or "stop": see cogmap_core.datasets.rosbag_reader
     until_error: bool = False  # a bag corrupt part-way: map what comes before the damage
     resume: Path | None = None
     param_changes: Mapping[str, float] = field(default_factory=dict)
     save_session: Path | None = None
     save_events: Path | None = None
-    camera: CameraOptions = field(default_factory=CameraOptions)
 
 
 @dataclass
@@ -206,13 +194,9 @@ class HeadlessPipeline:
         self.options = options or RunOptions()
         self.progress = progress
         self.announce = announce
-        self.format = resolve_format(self.bag, self.options.format)
+        self.format = resolve_format(self.bag, self.options.input.format)
         self.kind = KINDS[self.format]
-        self.frontend = (
-            (self.options.frontend or frontend_config_for(self.bag))
-            if self.kind.has_camera
-            else None
-        )
+        self.frontend = self.options.input.frontend_for(self.bag) if self.kind.has_camera else None
         self.files: list[Path] = []
         self.session_notes: list[str] = []
         options = self.options
@@ -234,7 +218,7 @@ class HeadlessPipeline:
             return SlamSession(params, self.frontend, evaluation=self.kind.evaluation)
         path = self.options.resume
         started = wallclock.perf_counter()
-        session, meta = resume_session(path, self.frontend, self.options.image_scale, changes)
+        session, meta = resume_session(path, self.frontend, self.options.input.image_scale, changes)
         self.meta = meta
         self.session_notes.append(
             f"resumed {path} in {wallclock.perf_counter() - started:.2f} s: "
@@ -254,7 +238,7 @@ class HeadlessPipeline:
                 end = self.session.log.end_time
                 if self.meta is None:
                     self.meta = SessionMeta(
-                        epoch=reader.start_stamp, image_scale=self.options.image_scale
+                        epoch=reader.start_stamp, image_scale=self.options.input.image_scale
                     )
                 else:
                     offset = self.meta.resume_offset(reader.start_stamp, end)
@@ -302,12 +286,12 @@ class HeadlessPipeline:
         return open_source(
             self.bag,
             self.format,
-            topics=o.topics,
-            image_scale=o.image_scale,
-            log=o.log,
+            topics=o.input.topics,
+            image_scale=o.input.image_scale,
+            log=o.input.log,
             on_clock_jump=o.on_clock_jump,
             on_corrupt="stop" if o.until_error else "error",
-            camera=replace(o.camera, frontend=self.frontend),
+            camera=replace(o.input.camera, frontend=self.frontend),
         )
 
     def _check_image_size(self, image: np.ndarray) -> None:
@@ -316,7 +300,7 @@ class HeadlessPipeline:
         min_w, min_h = self.frontend.minimum_image_size()
         height, width = image.shape[:2]
         if width < min_w or height < min_h:
-            scale = self.options.image_scale
+            scale = self.options.input.image_scale
             need_w, need_h = self.frontend.minimum_image_size(scale)
             cfg = self.frontend
             raise InputFileError(
@@ -365,8 +349,8 @@ class HeadlessPipeline:
         recording.meta["recorded_by"] = f"cogmap {__version__} run"
         recording.meta["input_format"] = self.format  # a sweep takes a bag's events only
         if self.frontend is not None:
-            recording.meta["topics"] = asdict(self.options.topics or BagTopics())
-            recording.meta["image_scale"] = self.options.image_scale
+            recording.meta["topics"] = asdict(self.options.input.topics or BagTopics())
+            recording.meta["image_scale"] = self.options.input.image_scale
         try:
             save_event_file(path, recording)
         except OSError as exc:  # the disk filled up or went read-only during the run
@@ -402,11 +386,11 @@ class HeadlessPipeline:
         config: dict[str, Any] = {"dataset": str(self.bag), "format": self.format}
         config["map"] = self.session.params.to_dict()  # a resumed session's own
         if self.frontend is not None:
-            config["image_scale"] = self.options.image_scale
+            config["image_scale"] = self.options.input.image_scale
             config["frontend"] = self.frontend.to_dict()
-            config["topics"] = asdict(self.options.topics or BagTopics())
+            config["topics"] = asdict(self.options.input.topics or BagTopics())
         else:
-            log = self.options.log
+            log = self.options.input.log
             config["frontend"] = log.config.to_dict()
             config["loops"] = None if log.loops is None else str(log.loops)
             config["ground_truth"] = None if log.ground_truth is None else str(log.ground_truth)

@@ -184,10 +184,10 @@ def _save(app: Any, ws: Any, name: str) -> str:
 
     send(ws, app.replay_path, value=name)
     until(lambda: app.replay_path.value == name, 10)
-    before = app._saving
+    before = app.export.saving
     send(ws, app.replay_button, value=True)
-    until(lambda: app._saving is not before, 10)
-    app._saving.join(60)
+    until(lambda: app.export.saving is not before, 10)
+    app.export.saving.join(60)
     return app.export_md.content
 
 
@@ -199,11 +199,11 @@ def _text(content: str) -> str:
 
 
 def web_save_paths(work: Path) -> str:
-    import app.server.app as app_module
+    import app.server.panels.export as export_panel
     from app.server.export import save_html_replay
     from tests.test_server_support import until
 
-    app_module.save_html_replay = functools.partial(save_html_replay, keyframes=5, seconds=0.5)
+    export_panel.save_html_replay = functools.partial(save_html_replay, keyframes=5, seconds=0.5)
     server, app = _app(work)
     ws = _client(server.get_port())
     until(lambda: len(server.get_clients()) == 1)

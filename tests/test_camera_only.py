@@ -296,13 +296,15 @@ def test_open_video_reads_frames_in_order(tmp_path: Path) -> None:
 
 
 def test_serve_replays_an_image_folder_at_the_given_rate(tmp_path: Path) -> None:
+    from app.inputs import InputOptions
     from app.server.replay import PlaybackState
     from cogmap_core.sources.detect import CameraOptions
     from tests.test_server_support import running_app, wait
 
     folder = image_folder(tmp_path, times=False, truth=False)
     options = CameraOptions(fps=4.0)
-    with running_app(folder, fmt="images", camera=options, data_dirs=[tmp_path]) as app:
+    read = InputOptions(format="images", camera=options)
+    with running_app(folder, input_options=read, data_dirs=[tmp_path]) as app:
         wait(app)
         replay = app.replay
         assert replay.state is PlaybackState.ENDED, replay.message
@@ -324,7 +326,7 @@ def test_camera_only_inputs_judge_loop_closures_past_a_metre() -> None:
 
 def test_each_camera_input_gets_its_own_front_end_settings(tmp_path: Path) -> None:
     # the page opens other inputs with the settings of each, not the first input's
-    from app.server.replay import resolve_frontend
+    from app.inputs import resolve_frontend
     from cogmap_core.datasets.profile import frontend_config_for
 
     given = FrontEndConfig(camera_fov_deg=33.0)

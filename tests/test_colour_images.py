@@ -13,7 +13,8 @@ import cv2
 import numpy as np
 import pytest
 
-from app.server.app import camera_rgb
+from app.inputs import InputOptions
+from app.server.panels.live_figures import camera_rgb
 from cogmap_core.datasets.bag_writer import IratBagWriter
 from cogmap_core.datasets.image_folder import open_image_folder, read_image
 from cogmap_core.datasets.jpeg import JpegDecoder, image_header
@@ -311,7 +312,8 @@ def test_the_page_lists_and_opens_videos_and_image_folders(tmp_path: Path) -> No
     (data / "notes").mkdir()
     (data / "notes" / "readme.md").write_text("no images here")
     options = CameraOptions(fps=10.0)
-    with running_app(folder, fmt="images", camera=options, data_dirs=[data]) as app:
+    read = InputOptions(format="images", camera=options)
+    with running_app(folder, input_options=read, data_dirs=[data]) as app:
         wait(app)
         # the last frame, red-green-blue, on the camera panel
         np.testing.assert_array_equal(app.camera_image.image, images[-1][:, :, ::-1])

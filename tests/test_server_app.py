@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from websockets.sync.client import ClientConnection
 
-import app.server.app as app_module
+import app.server.figures_worker as figures_module
 import app.server.view as view_module
 from app.server.app import ADVANCED_SLIDERS, SLIDERS, CogmapApp
 from app.server.export import g2o_bytes, save_html_replay, summary_dict, summary_inputs
@@ -375,7 +375,7 @@ def test_exports(short_bag: Path, reference: SlamSession, tmp_path: Path) -> Non
                 sent.append((name, content))
 
         for what in ("g2o", "summary", "sizes"):
-            app._download(FakeClient(), what)  # type: ignore[arg-type]
+            app.export.download(FakeClient(), what)  # type: ignore[arg-type]
         assert [name for name, _ in sent] == ["compact.g2o", "summary.json", "sizes.csv"]
         assert sent[0][1] == path.read_bytes()
         assert json.loads(sent[1][1])["maps"] == maps
@@ -660,7 +660,7 @@ def test_bad_gui_values_are_refused_before_any_client_sees_them(
                     def send_file_download(self, name: str, content: bytes, **_: object) -> None:
                         sent.append(name)
 
-                app._download(FakeClient(), "g2o")  # type: ignore[arg-type]
+                app.export.download(FakeClient(), "g2o")  # type: ignore[arg-type]
                 assert sent == ["standard.g2o"]  # the map this viewer shows
 
 
@@ -745,7 +745,7 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
     Views take it briefly for what they read; the figures are computed from inputs taken under it.
     """
     with _idle_app_with_one_viewer(short_bag) as app:
-        figures, links = dict(app._figures), app._links
+        figures, links = dict(app.figures.figures), app.figures.links
         assert len(figures) == len(ALL_MODES)
         free: list[tuple[str, bool]] = []
 
@@ -756,27 +756,29 @@ def test_figures_are_computed_and_views_refreshed_without_the_replay_lock(
 
             return call
 
-        monkeypatch.setattr(app_module, "judge_links", spy("false links", app_module.judge_links))
         monkeypatch.setattr(
-            app_module, "compute_figures", spy("figures", app_module.compute_figures)
+            figures_module, "judge_links", spy("false links", figures_module.judge_links)
+        )
+        monkeypatch.setattr(
+            figures_module, "compute_figures", spy("figures", figures_module.compute_figures)
         )
         monkeypatch.setattr(
             view_module.ClientView, "refresh", spy("view", view_module.ClientView.refresh)
         )
         updates = app.streamer.stats.updates
         with app.replay.lock:  # forget the figures: the next round computes them all again
-            app._false_key = None
-            app._figures_key.clear()
-        app._update_figures(True, ALL_MODES)
+            app.figures.false_key = None
+            app.figures.keys.clear()
+        app.figures.request(True, ALL_MODES)
         wait(app)
         # the replay has ended: only the figures' round publishes the scene
         assert app.streamer.stats.updates == updates + 1
         assert free == [("false links", True)] + [("figures", True)] * len(ALL_MODES) + [
             ("view", True)
         ]
-        assert app._figures == figures
-        np.testing.assert_array_equal(app._links.time, links.time)
-        np.testing.assert_array_equal(app._links.false, links.false)
+        assert app.figures.figures == figures
+        np.testing.assert_array_equal(app.figures.links.time, links.time)
+        np.testing.assert_array_equal(app.figures.links.false, links.false)
         # the per-frame update refreshes each view outside the replay lock too
         free.clear()
         app.on_maps(app.replay, ALL_MODES, forced=True)

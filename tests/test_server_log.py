@@ -10,9 +10,9 @@ import pytest
 
 from app.cli import main
 from app.server import export
-from app.server.app import recent_links
 from app.server.export import summary_dict, summary_inputs
 from app.server.figures import LinkJudgement, false_link_label, layout_radius_label
+from app.server.panels.live_figures import recent_links
 from app.server.replay import PlaybackState
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams

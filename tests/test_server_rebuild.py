@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import app.server.replay as replay_module
+import app.server.replay_rebuilds as replay_module
 from app.pipeline import HeadlessPipeline, RunOptions
 from app.server.export import g2o_bytes
 from app.server.rebuild import (

@@ -8,11 +8,9 @@ import numpy as np
 import pytest
 import viser
 
+from app.server.panels.inspect import describe_edge
 from app.server.scene import (
-    CHUNK,
-    LOOP_Z,
     MAP_COLORS,
-    SEQUENTIAL_Z,
     VERTEX_FRACTION,
     ChunkedNodes,
     MapExtras,
@@ -20,12 +18,10 @@ from app.server.scene import (
     SceneStreamer,
     StreamStats,
     cluster_color,
-    edge_error,
-    edge_errors,
-    edge_segments,
     nice,
 )
-from app.server.view import describe_edge
+from app.server.scene_nodes import CHUNK
+from app.server.scene_style import LOOP_Z, SEQUENTIAL_Z, edge_error, edge_errors, edge_segments
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry

@@ -32,8 +32,8 @@ import websockets.exceptions
 import zstandard
 from websockets.sync.client import ClientConnection, connect
 
-import app.server.app as app_module
 import app.server.files as files_module
+import app.server.panels.export as export_panel
 from app.server.access import AccessGateError, AccessPolicy, guarded_server
 from app.server.app import CogmapApp
 from app.server.export import save_html_replay
@@ -125,7 +125,7 @@ def update(ws: ClientConnection, uuid: str, value: object) -> None:
 def quick_replays(monkeypatch: pytest.MonkeyPatch) -> None:
     """HTML replays of 5 key frames (the page's 240 take seconds each)."""
     monkeypatch.setattr(
-        app_module,
+        export_panel,
         "save_html_replay",
         functools.partial(save_html_replay, keyframes=5, seconds=0.5),
     )
@@ -135,11 +135,11 @@ def saved(app: CogmapApp, ws: ClientConnection, name: str) -> str:
     """Type ``name`` as the replay's name and click "save HTML replay"; the message shown."""
     send(ws, app.replay_path, value=name)
     until(lambda: app.replay_path.value == name, 10, "the name typed")
-    before = app._saving
+    before = app.export.saving
     send(ws, app.replay_button, value=True)
-    until(lambda: app._saving is not before, 10, "the save to start")
-    assert app._saving is not None
-    app._saving.join(60)
+    until(lambda: app.export.saving is not before, 10, "the save to start")
+    assert app.export.saving is not None
+    app.export.saving.join(60)
     return app.export_md.content
 
 
@@ -485,7 +485,7 @@ def test_a_visitor_cannot_tell_what_exists_outside_the_data_folders(
         # summary.json names the bag, not its server path (here outside the data folders)
         sent: list[tuple[str, bytes]] = []
         visitor = types.SimpleNamespace(send_file_download=lambda n, c, **_: sent.append((n, c)))
-        app._download(visitor, "summary")  # type: ignore[arg-type]
+        app.export.download(visitor, "summary")  # type: ignore[arg-type]
         assert json.loads(sent[0][1])["dataset"] == short_bag.name == "figure_eight_1lap.bag"
 
 

@@ -1,10 +1,14 @@
 """The live web app (``cogmap serve``): a viser page that replays a bag and tunes the maps live.
 
-- :mod:`app.server.replay` -- the worker thread owning the SLAM session (playback, rebuilds).
+- :mod:`app.server.replay` -- the worker thread owning the SLAM session (playback; its rebuilds
+  in :mod:`app.server.replay_rebuilds`, its state in :mod:`app.server.replay_state`).
 - :mod:`app.server.rebuild` -- rebuilding maps for new parameters (worker processes, cache).
-- :mod:`app.server.scene` -- incremental streaming of the maps into the 3-D scene.
-- :mod:`app.server.view` -- each viewer's own view (map, layers, camera, inspection, pin).
-- :mod:`app.server.app` -- the page: panels, controls, counters, chart, exports.
+- :mod:`app.server.figures_worker` -- the maps' accuracy figures, on a thread of their own.
+- :mod:`app.server.scene` -- incremental streaming of the maps into the 3-D scene
+  (:mod:`~app.server.map_layer`, :mod:`~app.server.scene_nodes`, :mod:`~app.server.scene_style`).
+- :mod:`app.server.view` -- each viewer's own view (map, layers, camera, inspection, pin, route).
+- :mod:`app.server.panels` -- the page's panels, one builder each.
+- :mod:`app.server.app` -- the page: composes the panels, wires them to the workers.
 - :mod:`app.server.export` -- g2o, summary.json, sizes.csv and the self-contained HTML replay.
 
 Nothing is imported here, so that a rebuild worker process (``python -m app.server.rebuild``)

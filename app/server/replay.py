@@ -17,36 +17,33 @@ when a slider moved. The bag is re-read only for the camera images of cached fra
 
 Listeners are called from the worker thread only (:class:`ReplayListener`); everything that reads
 the maps from another thread takes :attr:`Replay.lock`.
+
+This module has the requests, the worker's loop, opening the input and playback; the rebuilds
+(new parameters, restart, seek) are in :mod:`app.server.replay_rebuilds`, the state the page
+reads (:class:`PlaybackState`, :class:`RebuildRecord`) in :mod:`app.server.replay_state`.
 """
 
 from __future__ import annotations
 
 import array
-import bisect
 import copy
 import math
 import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field, replace
-from enum import StrEnum
+from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Protocol
 
-from app.server.rebuild import (
-    Abandoned,
-    Builder,
-    BuildTask,
-    MapCache,
-    ThreadBuilder,
-    same_schedule,
-)
+from app.inputs import ReplayInput
+from app.server.rebuild import Abandoned, Builder, MapCache, ThreadBuilder
+from app.server.replay_rebuilds import PARAMS_USED, ReplayRebuilds, needs_rebuild
+from app.server.replay_state import PlaybackState, RebuildRecord
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.datasets import BagReader, BagTopics
-from cogmap_core.datasets.profile import frontend_config_for
+from cogmap_core.datasets import BagReader
 from cogmap_core.errors import CogmapError
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEndConfig
@@ -54,85 +51,25 @@ from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import ALL_MODES, SlamSession
 from cogmap_core.sources.detect import (
     KINDS,
-    CameraOptions,
-    LogOptions,
     Source,
     check_sessions_allowed,
     open_source,
     resolve_format,
 )
 
-GenerationProgress = Callable[[int, int], None]
-BagSource = Path | Callable[[GenerationProgress], Path]
-#: A front-end configuration, or a function choosing it for the bag once it is known.
-FrontEndSource = FrontEndConfig | Callable[[Path], FrontEndConfig] | None
-
-
-def resolve_frontend(source: FrontEndSource, path: Path) -> FrontEndConfig:
-    """The front-end settings for a camera input at ``path``: given, computed, or its profile."""
-    if isinstance(source, FrontEndConfig):
-        return source
-    return frontend_config_for(path) if source is None else source(path)
+__all__ = [
+    "PARAMS_USED",
+    "PlaybackState",
+    "RebuildRecord",
+    "Replay",
+    "ReplayListener",
+    "needs_rebuild",
+]
 
 
 #: A replay that falls further behind its schedule than this (s) re-anchors instead of racing.
 MAX_LAG_S = 1.0
 _TIME_TOLERANCE = 1e-6
-
-_CLUSTERING_AND_OPTIMISATION = frozenset(
-    {
-        "t_interval",
-        "t_total",
-        "huber_scale",
-        "edge_noise_model",
-        "link_sigma_position",
-        "link_sigma_heading",
-        "gate_position",
-        "gate_heading",
-        "gate_drift_position",
-        "gate_drift_heading",
-        "gate_consensus",
-        "loop_model",
-        "loop_scale",
-    }
-)
-_INTEGRATION = frozenset({"integration_radius", "integration_max_residual", "integration_min_age"})
-#: The map parameters each map depends on. A change of other parameters leaves a map exactly as
-#: it is, so its rebuild is skipped (the neighborhood field and short-edge removal belong to the
-#: compact map only, scene integration to the two non-standard maps). The tests rebuild every map
-#: for a change of every parameter and check this table.
-PARAMS_USED: dict[MapMode, frozenset[str]] = {
-    MapMode.STANDARD: _CLUSTERING_AND_OPTIMISATION,
-    MapMode.SCENE_INTEGRATION: _CLUSTERING_AND_OPTIMISATION | _INTEGRATION,
-    MapMode.COMPACT: frozenset(MapParams().to_dict()),
-}
-
-
-def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:
-    """Whether map ``mode`` built with ``old`` can differ from one built with ``new``."""
-    return any(getattr(old, name) != getattr(new, name) for name in PARAMS_USED[mode])
-
-
-def _label_params(maps: dict[MapMode, CognitiveMap], params: MapParams) -> None:
-    """Give maps taken from the cache the parameters they are adopted with.
-
-    A cached map was built with parameters that agree with ``params`` in every one it uses
-    (:data:`PARAMS_USED`) but may differ in the others; it must carry ``params`` so that later
-    changes compare against what is in force.
-    """
-    for cmap in maps.values():
-        if cmap.params != params:
-            cmap.set_params(params)
-
-
-class PlaybackState(StrEnum):
-    """What the worker is doing."""
-
-    LOADING = "loading"
-    PLAYING = "playing"
-    PAUSED = "paused"
-    ENDED = "ended"
-    ERROR = "error"
 
 
 class ReplayListener(Protocol):
@@ -148,109 +85,64 @@ class ReplayListener(Protocol):
         """The maps ``modes`` changed; ``forced``: show it now (not rate-limited)."""
 
 
-@dataclass
-class RebuildRecord:
-    """Timing of one parameter rebuild (for the latency benchmark and the page's log).
-
-    Attributes:
-        params: the parameters rebuilt for.
-        frames: frames replayed from the cache.
-        requested: ``time.perf_counter()`` when the parameters were requested.
-        compute_s: rebuild time of each map (s).
-        published: ``time.perf_counter()`` when each map was handed to the listener.
-        how: per map, ``"built"``, ``"cached"`` (built before for these parameters), ``"kept"``
-            (the change does not affect it, or gives it the same cluster schedule).
-        resumed: per map built, the events it did not replay again: it continued from the state
-            kept at the last cluster close its schedule shares with the map built before
-            (:class:`~app.server.rebuild.Checkpoints`); 0 when built from the first event.
-        completed: all maps rebuilt (False: abandoned for newer parameters).
-
-    """
-
-    params: MapParams
-    frames: int
-    requested: float
-    compute_s: dict[MapMode, float] = field(default_factory=dict)
-    published: dict[MapMode, float] = field(default_factory=dict)
-    how: dict[MapMode, str] = field(default_factory=dict)
-    resumed: dict[MapMode, int] = field(default_factory=dict)
-    completed: bool = False
-
-    def latency(self, mode: MapMode) -> float | None:
-        """Seconds from the request to map ``mode`` being shown (None if it never was)."""
-        at = self.published.get(mode)
-        return None if at is None else at - self.requested
-
-
-class Replay:
+class Replay(ReplayRebuilds):
     """Replays one bag or log through a :class:`SlamSession` on a worker thread.
 
     Args:
-        bag: the bag or log, or a function that produces it given a progress callback (the
-            built-in dataset, generated on first use).
+        source: what is replayed and how it is read (:class:`~app.inputs.ReplayInput`: the bag
+            or log, or a function that produces it given a progress callback -- the built-in
+            dataset, generated on first use --, its kind, front end, topics, log options, ...).
         listener: receives updates (on the worker thread).
         params: initial map parameters.
-        frontend: front-end configuration, or a function of the bag giving it (default: the
-            iRat defaults with the bag's ``<name>.frontend.json`` profile, as ``cogmap run``).
-        topics: the bag's topic names (default: the iRat 2011 Australia bag's).
-        image_scale: JPEG decode reduction (1, 2, 4, 8).
         speed: playback speed (data seconds per wall second; ``math.inf``: as fast as possible).
         autoplay: start playing as soon as the bag is open.
         priority: maps rebuilt first after a parameter change (the displayed ones).
         builder: where maps are rebuilt (:mod:`app.server.rebuild`; default: this thread). The
             replay owns it and closes it when stopped.
-        fmt: the input's kind (``bag``, ``tuc``, ``csv``; None: detected from the content).
-        log: how to read a log (ignored for bags).
         resume: a saved session and its metadata (:func:`~cogmap_core.session_file.load_session`)
             to continue: its maps are shown at once and grow with the bag's frames, which follow
             the session's data as if the bags were one. Restarting or seeking goes back no
             further than the session's end. Bags only: a log with a session is refused.
+        lock: guards the worker-owned state (below).
+        opened: the input already open (below).
 
     Times: :attr:`frame_time`, :attr:`duration` and :meth:`seek` are positions in the bag;
     the session's data time of bag time ``t`` is ``t +`` :attr:`time_offset` (0 unless
     resuming), and :attr:`cursor` counts the session's frames (those of the resumed session
     first, :attr:`base_frames` of them).
 
+    The worker's rebuilds (parameters, restart, seek) are in :mod:`app.server.replay_rebuilds`.
+
     """
 
     def __init__(
         self,
-        bag: BagSource,
+        source: ReplayInput,
         listener: ReplayListener,
         params: MapParams | None = None,
-        frontend: FrontEndSource = None,
-        image_scale: int = 1,
         speed: float = 1.0,
         autoplay: bool = True,
         priority: tuple[MapMode, ...] = (MapMode.COMPACT,),
-        topics: BagTopics | None = None,
         builder: Builder | None = None,
-        fmt: str | None = None,
-        log: LogOptions | None = None,
         resume: tuple[SlamSession, SessionMeta] | None = None,
         lock: threading.RLock | None = None,
         opened: Source | None = None,
-        camera: CameraOptions | None = None,
     ) -> None:
         """Set up the replay (nothing is read until :meth:`start`).
 
         ``lock`` guards the worker-owned state; an app that swaps replays passes one lock to
         all of them, so a reader that took ``app.replay.lock`` holds the lock of the replay it
-        then finds in ``app.replay``. ``opened`` is the input ``bag`` already open (a caller that
-        checked it hands it over instead of having it opened twice); the replay closes it.
+        then finds in ``app.replay``. ``opened`` is the input ``source`` names already open (a
+        caller that checked it hands it over instead of having it opened twice); the replay
+        closes it.
         """
-        self.bag_source = bag
-        self.format = fmt
-        self.log_options = log or LogOptions()
-        self.camera_options = camera  # a camera input's odometry and frame rate (issue 26)
+        self.source = source
         self.has_camera = True  # known once the input is open
         self.listener = listener
-        self.frontend_source = frontend
+        frontend = source.options.frontend
         self.frontend_config: FrontEndConfig | None = (
             frontend if isinstance(frontend, FrontEndConfig) else None
         )
-        self.topics = topics
-        self.image_scale = image_scale
         self.lock = lock if lock is not None else threading.RLock()
         self._cond = threading.Condition()
         self._thread: threading.Thread | None = None
@@ -532,7 +424,8 @@ class Replay:
         try:
             path = self._resolve_bag()
             self.bag_path = path
-            fmt = resolve_format(path, self.format)
+            options = self.source.options
+            fmt = resolve_format(path, options.format)
             if self.resume_meta is not None:
                 check_sessions_allowed(fmt, path, "--resume", "serve it without --resume")
             reader, self._opened = self._opened, None
@@ -540,10 +433,10 @@ class Replay:
                 reader = open_source(
                     path,
                     fmt,
-                    topics=self.topics,
-                    image_scale=self.image_scale,
-                    log=self.log_options,
-                    camera=self.camera_options_for(path),
+                    topics=options.topics,
+                    image_scale=options.image_scale,
+                    log=options.log,
+                    camera=options.camera_for(path),
                 )
             self.has_camera = KINDS[fmt].has_camera
             if self.session.log.frames == 0:  # the front end is chosen for the input
@@ -572,18 +465,14 @@ class Replay:
         self._notify_status()
         self._notify_maps(ALL_MODES, True)
 
-    def camera_options_for(self, path: Path) -> CameraOptions:
-        """The camera options with the front-end settings of ``path`` (its own profile).
-
-        A camera input's visual odometry and colour averaging take the settings its front end
-        runs with, not those of the input served first.
-        """
-        base = self.camera_options or CameraOptions()
-        return replace(base, frontend=resolve_frontend(self.frontend_source, path))
+    @property
+    def format(self) -> str | None:
+        """The input's kind as given (None: detected from the content when it is opened)."""
+        return self.source.options.format
 
     def _choose_frontend(self, path: Path, fmt: str) -> None:
         kind = KINDS[fmt]
-        config = resolve_frontend(self.frontend_source, path) if kind.has_camera else None
+        config = self.source.options.frontend_for(path) if kind.has_camera else None
         with self.lock:
             self.frontend_config = config
             self.session = SlamSession(self._target_params, config, evaluation=kind.evaluation)
@@ -591,7 +480,7 @@ class Replay:
             self.cache.clear()  # (the builder's workers notice a new log by themselves)
 
     def _resolve_bag(self) -> Path:
-        source = self.bag_source
+        source = self.source.bag
         if isinstance(source, Path):
             return source
 
@@ -720,106 +609,6 @@ class Replay:
         self._notify_maps(ALL_MODES, True)
         self._notify_status()
 
-    # ------------------------------------------------------------------ restart, seek
-    def _do_restart(self) -> None:
-        with self._cond:
-            self._restart_request = False
-            self._fast_forward_to = None
-        if self.reader is None or self.state is PlaybackState.ERROR:
-            with self._cond:
-                self.state = PlaybackState.LOADING
-            if self.reader is None:
-                self._open()
-                return
-        self._seek_to_frame(0)
-
-    def _do_seek(self) -> None:
-        with self._cond:
-            target = self._seek_request
-            self._seek_request = None
-            self._fast_forward_to = None
-        assert target is not None
-        if self.reader is None:
-            return
-        if self.state is PlaybackState.ERROR:  # seeking re-reads the bag, like a restart
-            with self._cond:
-                self.state = PlaybackState.LOADING
-        log = self.session.log
-        cached_end = self._bag_time(log.frame_time[-1]) if log.frames else -math.inf
-        try:
-            if target <= cached_end or self.session.finished:
-                k = bisect.bisect_right(log.frame_time, target + self.time_offset)
-                self._seek_to_frame(k)
-            else:
-                # Beyond what the front end has seen: replay the cache to its end, then run the
-                # front end as fast as possible up to the target.
-                if self.cursor < log.frames or self.at_end:
-                    self._seek_to_frame(log.frames)
-                with self._cond:
-                    self._fast_forward_to = target
-        except Abandoned:
-            with self._cond:
-                if self._seek_request is None and not self._restart_request:
-                    self._seek_request = target  # interrupted by parameters: seek again
-            raise
-
-    def _seek_to_frame(self, k: int) -> None:
-        """Rebuild the maps up to frame ``k`` from the cache and continue reading from there."""
-        with self._cond:
-            generation = self._generation
-            params = self._target_params
-            self._params_request = None
-        log = self.session.log
-        base = self.base_frames
-        k = max(base, min(k, log.frames))
-        maps: dict[MapMode, CognitiveMap] = {}
-        tasks = []
-        if k == base and self._base_maps and params == self._base_params:
-            # back to the resumed state: the session's own maps (nothing to rebuild)
-            maps = {mode: copy.deepcopy(cmap) for mode, cmap in self._base_maps.items()}
-        else:
-            for mode in self._order():
-                cached = self.cache.take(self.cache.key(mode, params, k, False, self._log_id))
-                if cached is not None:
-                    maps[mode] = cached
-                else:
-                    tasks.append(BuildTask(mode, params, k, False))
-        try:
-            for built in self.builder.build(log, tasks, lambda: self._generation != generation):
-                maps[built.task.mode] = built.cmap
-        except Abandoned:
-            for mode, cmap in maps.items():  # what was done is kept for the next time
-                self.cache.put(self.cache.key(mode, params, k, False, self._log_id), cmap)
-            raise
-        with self.lock:
-            self._keep_replaced(maps)
-            _label_params(maps, params)
-            self.session.adopt(params, maps)
-            self.session.finished = False
-            if k == base:
-                self.processing_s = 0.0
-            self.cursor = k
-            self.at_end = False
-            self.frame_time = self._bag_time(log.frame_time[k - 1]) if k > base else math.nan
-        if self.state is not PlaybackState.ERROR:
-            if k > base:
-                # from the frame the maps now end with: it is shown (the camera at once after a
-                # seek, not an old frame until a step), then the frames after it are read
-                t = log.frame_time[k - 1]
-                before = log.frame_time[k - 2] if k - 1 > base else t - 1.0
-                start = max(0.0, self._bag_time(t) - min(1e-3, (t - before) / 2))
-                self._start_pass(start)
-                self._show_current(k)
-            else:
-                self._start_pass(0.0)
-        with self._cond:
-            if self.state is PlaybackState.LOADING:
-                self.state = PlaybackState.PAUSED
-            self.message = ""
-        self._update_state_locked()
-        self._notify_maps(ALL_MODES, True)
-        self._notify_status()
-
     def _show_current(self, k: int) -> None:
         """Read frame ``k - 1`` again and show it (:meth:`ReplayListener.on_frame`), not applied.
 
@@ -840,100 +629,3 @@ class Replay:
             self.listener.on_frame(self, frame, None if matched < 0 else matched)
         except Exception:
             traceback.print_exc(file=sys.stderr)
-
-    # ------------------------------------------------------------------ parameter rebuilds
-    def _order(self) -> tuple[MapMode, ...]:
-        first = tuple(m for m in self._priority if m in self.session.modes)
-        return first + tuple(m for m in self.session.modes if m not in first)
-
-    def _keep_replaced(self, maps: dict[MapMode, CognitiveMap]) -> None:
-        """Put the current maps that ``maps`` replace into the cache (call with the lock)."""
-        for mode, cmap in maps.items():
-            old = self.session.maps.maps.get(mode)
-            if old is not None and old is not cmap:
-                key = self.cache.key(mode, old.params, self.cursor, self.at_end, self._log_id)
-                self.cache.put(key, old)
-
-    def _do_rebuild(self) -> None:
-        with self._cond:
-            params = self._target_params
-            requested = self._params_request
-            self._params_request = None
-            generation = self._generation
-        assert requested is not None
-        frames = self.cursor
-        finish = self.at_end
-        record = RebuildRecord(params, frames, requested)
-        self.rebuilds.append(record)
-        if self.state is PlaybackState.ERROR and self.reader is None:
-            # Nothing to rebuild from (the bag never opened): keep the parameters for later.
-            with self.lock:
-                self.session.params = params
-            return
-        maps = self.session.maps
-        self.rebuilding = (  # the maps the change can affect (a few may turn out unchanged)
-            params,
-            tuple(m for m in self._order() if needs_rebuild(m, maps[m].params, params)),
-        )
-        self._notify_status()  # (the page shows that the maps are being rebuilt)
-        try:
-            self._rebuild(record, params, frames, finish, generation)
-        finally:
-            self.rebuilding = None
-        with self._cond:
-            self._anchor = None
-        self._notify_maps((), True)  # the pages' "shown after" line now covers this change
-        self._notify_status()
-
-    def _rebuild(
-        self, record: RebuildRecord, params: MapParams, frames: int, finish: bool, generation: int
-    ) -> None:
-        log = self.session.log
-        tasks = []
-        unchanged: dict[MapParams, bool] = {}  # per parameters in use (the maps mostly share)
-        for mode in self._order():
-            started = time.perf_counter()
-            current = self.session.maps[mode]
-            keep = not needs_rebuild(mode, current.params, params)
-            if not keep:
-                if current.params not in unchanged:
-                    unchanged[current.params] = same_schedule(
-                        log, frames, finish, current.params, params
-                    )
-                keep = unchanged[current.params]
-            if keep:
-                cmap: CognitiveMap | None = current  # the change leaves this map as it is
-                with self.lock:
-                    current.set_params(params)
-                record.how[mode] = "kept"
-            else:
-                cmap = self.cache.take(self.cache.key(mode, params, frames, finish, self._log_id))
-                record.how[mode] = "cached"
-            if cmap is None:
-                tasks.append(BuildTask(mode, params, frames, finish))
-                continue
-            self._publish_rebuilt(record, mode, params, cmap, time.perf_counter() - started)
-        for built in self.builder.build(log, tasks, lambda: self._generation != generation):
-            record.how[built.task.mode] = "built"
-            record.resumed[built.task.mode] = built.resumed_at
-            self._publish_rebuilt(record, built.task.mode, params, built.cmap, built.compute_s)
-        record.completed = True
-
-    def _publish_rebuilt(
-        self,
-        record: RebuildRecord,
-        mode: MapMode,
-        params: MapParams,
-        cmap: CognitiveMap,
-        compute_s: float,
-    ) -> None:
-        record.compute_s[mode] = compute_s
-        with self.lock:
-            self._keep_replaced({mode: cmap})
-            _label_params({mode: cmap}, params)
-            self.session.adopt(params, {mode: cmap})
-        pending = self.rebuilding
-        if pending is not None:
-            self.rebuilding = (pending[0], tuple(m for m in pending[1] if m is not mode))
-        self._notify_maps((mode,), True)
-        record.published[mode] = time.perf_counter()
