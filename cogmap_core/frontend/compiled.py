@@ -16,6 +16,7 @@ code is cached on disk where :func:`cogmap_core.compiled_replay.choose_cache` sa
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 from pathlib import Path
@@ -197,7 +198,82 @@ def _match_pairs(
     return best // n_off, best % n_off, best_sad, evaluated
 
 
-_COMPILED = ("_block_sums", "_colour_block_sums", "_window_blocks", "_pair_sad", "_within")
+def _decode_axis(sums: Any, cells: Any, sincos: Any, dim: int) -> float:
+    """``_ors_decode`` of :mod:`cogmap_core.frontend.pose_cells`: cells in index order."""
+    order = np.argsort(cells)
+    s = 0.0
+    c = 0.0
+    for m in range(len(order)):
+        cell = cells[order[m]]
+        total = sums[order[m]]
+        s += sincos[cell, 0] * total
+        c += sincos[cell, 1] * total
+    value = math.atan2(s, c) * dim / (2.0 * math.pi) - 1.0
+    while value < 0:
+        value += dim
+    while value > dim:
+        value -= dim
+    return value
+
+
+def _decode_peak(p: Any, reach: int, sincos_xy: Any, sincos_th: Any) -> Any:
+    """``PoseCellNetwork.find_best``: the same per-axis sums, added in the same order."""
+    n_th, n_y, n_x = p.shape
+    best = 0
+    flat = p.ravel()
+    for m in range(1, flat.size):
+        if flat[m] > flat[best]:
+            best = m
+    k = best // (n_y * n_x)
+    j = (best // n_x) % n_y
+    i = best % n_x
+    w = 2 * reach + 1
+    ith = np.empty(w, dtype=np.int64)
+    iy = np.empty(w, dtype=np.int64)
+    ix = np.empty(w, dtype=np.int64)
+    for m in range(w):
+        ith[m] = (k + m - reach) % n_th
+        iy[m] = (j + m - reach) % n_y
+        ix[m] = (i + m - reach) % n_x
+    x_sums = np.empty(w)
+    y_sums = np.empty(w)
+    z_sums = np.empty(w)
+    # numpy's reductions over a leading axis: the first term, then the others in order
+    for c in range(w):
+        first = True
+        for a in range(w):
+            for b in range(w):
+                v = p[ith[a], iy[b], ix[c]]
+                x_sums[c] = v if first else x_sums[c] + v
+                first = False
+    for b in range(w):
+        first = True
+        for a in range(w):
+            for c in range(w):
+                v = p[ith[a], iy[b], ix[c]]
+                y_sums[b] = v if first else y_sums[b] + v
+                first = False
+    for a in range(w):
+        first = True
+        for b in range(w):
+            for c in range(w):
+                v = p[ith[a], iy[b], ix[c]]
+                z_sums[a] = v if first else z_sums[a] + v
+                first = False
+    x = _decode_axis(x_sums, ix, sincos_xy, n_x)
+    y = _decode_axis(y_sums, iy, sincos_xy, n_y)
+    th = _decode_axis(z_sums, ith, sincos_th, n_th)
+    return x, y, th
+
+
+_COMPILED = (
+    "_decode_axis",
+    "_block_sums",
+    "_colour_block_sums",
+    "_window_blocks",
+    "_pair_sad",
+    "_within",
+)
 
 
 def kernels() -> SimpleNamespace | None:
@@ -231,10 +307,12 @@ def _load() -> SimpleNamespace | None:
         compiled = {name: jit(globals()[name]) for name in _COMPILED}
         globals().update(compiled)  # the loops call each other by their module names
         match = jit(_match_pairs)
+        decode = jit(_decode_peak)
     except Exception:  # no numba, or a broken one: the numpy code gives the same results
         return None
     return SimpleNamespace(
         match_pairs=match,
         block_sums=compiled["_block_sums"],
         colour_block_sums=compiled["_colour_block_sums"],
+        decode_peak=decode,
     )

@@ -563,6 +563,7 @@ class _BlockPlan:
         # block corners in the integral image of the used part
         self.ys = np.arange(out_y + 1) * self.by
         self.xs = np.arange(out_x + 1) * self.bx
+        self.compiled = kernels()
 
     def resample(self, image: NDArray[np.uint8]) -> NDArray[np.float64]:
         """Block means in [0, 1]: ``sum / 255 / pixels`` as OpenRatSLAM divides.
@@ -573,6 +574,13 @@ class _BlockPlan:
         row summed at once (``cv2.reduce``, in 32-bit integers), then its ``by`` rows.
         """
         crop = image[self.rows, self.cols]
+        if self.compiled is not None:
+            sums = np.empty((self.out_y, self.out_x), dtype=np.int64)
+            block_sums = (
+                self.compiled.colour_block_sums if crop.ndim == 3 else self.compiled.block_sums
+            )
+            block_sums(crop, self.ys, self.xs, sums)
+            return sums.astype(np.float64) / (765.0 if crop.ndim == 3 else 255.0) / self.divisor
         if crop.ndim == 3:
             rows = crop.reshape(self.by * self.out_y * self.out_x, self.bx * 3)
             per_row = cv2.reduce(rows, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S)
