@@ -32,30 +32,25 @@ _KERNELS: SimpleNamespace | None = None
 _LOADED = False
 
 
-def _block_sums(image: Any, rows: Any, cols: Any, out: Any) -> None:
-    """``out[i, j]``: sum of ``image[rows[i]:rows[i+1], cols[j]:cols[j+1]]`` (int64)."""
-    for i in range(len(rows) - 1):
-        for j in range(len(cols) - 1):
-            out[i, j] = 0
-        for r in range(rows[i], rows[i + 1]):
-            for j in range(len(cols) - 1):
-                s = 0
-                for c in range(cols[j], cols[j + 1]):
-                    s += image[r, c]
-                out[i, j] += s
+def _block_sums(flat: Any, depth: int, rows: Any, cols: Any, out: Any) -> None:
+    """``out[i, j]``: sum of the pixels ``rows[i]:rows[i+1]``, ``cols[j]:cols[j+1]`` (int64).
 
-
-def _colour_block_sums(image: Any, rows: Any, cols: Any, out: Any) -> None:
-    """As :func:`_block_sums` for a ``(h, w, 3)`` image: blue + green + red of each block."""
+    ``flat``: the image as ``(h, w * depth)``; a colour image (``depth`` 3) adds blue, green
+    and red.
+    """
+    first, last = cols[0] * depth, cols[-1] * depth
+    column = np.empty(last - first, dtype=np.int64)
     for i in range(len(rows) - 1):
-        for j in range(len(cols) - 1):
-            out[i, j] = 0
+        column[:] = 0
         for r in range(rows[i], rows[i + 1]):
-            for j in range(len(cols) - 1):
-                s = 0
-                for c in range(cols[j], cols[j + 1]):
-                    s += image[r, c, 0] + image[r, c, 1] + image[r, c, 2]
-                out[i, j] += s
+            line = flat[r]
+            for c in range(first, last):
+                column[c - first] += line[c]
+        for j in range(len(cols) - 1):
+            s = 0
+            for c in range(cols[j] * depth - first, cols[j + 1] * depth - first):
+                s += column[c]
+            out[i, j] = s
 
 
 def _window_blocks(view: Any, first: int, rows: Any, cols: Any, out: Any) -> None:
@@ -269,7 +264,6 @@ def _decode_peak(p: Any, reach: int, sincos_xy: Any, sincos_th: Any) -> Any:
 _COMPILED = (
     "_decode_axis",
     "_block_sums",
-    "_colour_block_sums",
     "_window_blocks",
     "_pair_sad",
     "_within",
@@ -277,7 +271,7 @@ _COMPILED = (
 
 
 def kernels() -> SimpleNamespace | None:
-    """The compiled loops (``match_pairs``, ``block_sums``, ``colour_block_sums``), or None.
+    """The compiled loops (``match_pairs``, ``block_sums``, ``decode_peak``), or None.
 
     Compiled (or loaded from the cache) on the first call; None when numba is missing, fails,
     or ``COGMAP_COMPILED_FRONTEND=0``.
@@ -313,6 +307,5 @@ def _load() -> SimpleNamespace | None:
     return SimpleNamespace(
         match_pairs=match,
         block_sums=compiled["_block_sums"],
-        colour_block_sums=compiled["_colour_block_sums"],
         decode_peak=decode,
     )

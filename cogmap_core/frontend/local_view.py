@@ -564,6 +564,8 @@ class _BlockPlan:
         self.ys = np.arange(out_y + 1) * self.by
         self.xs = np.arange(out_x + 1) * self.bx
         self.compiled = kernels()
+        self.abs_ys = self.ys + y0
+        self.abs_xs = self.xs + x0
 
     def resample(self, image: NDArray[np.uint8]) -> NDArray[np.float64]:
         """Block means in [0, 1]: ``sum / 255 / pixels`` as OpenRatSLAM divides.
@@ -571,15 +573,15 @@ class _BlockPlan:
         The block sums are exact integers, from the integral image (OpenCV's, in float64: exact
         up to 2^53). A colour image's blocks sum blue, green and red, divided by ``255 * 3``
         then by the pixels (OpenRatSLAM's ``bgr8`` branch): each block's ``bx * 3`` bytes of a
-        row summed at once (``cv2.reduce``, in 32-bit integers), then its ``by`` rows.
+        row summed at once (``cv2.reduce``, in 32-bit integers), then its ``by`` rows. With
+        numba, one compiled loop adds the same integers (:mod:`cogmap_core.frontend.compiled`).
         """
         crop = image[self.rows, self.cols]
         if self.compiled is not None:
             sums = np.empty((self.out_y, self.out_x), dtype=np.int64)
-            block_sums = (
-                self.compiled.colour_block_sums if crop.ndim == 3 else self.compiled.block_sums
-            )
-            block_sums(crop, self.ys, self.xs, sums)
+            depth = 3 if image.ndim == 3 else 1
+            flat = np.ascontiguousarray(image).reshape(image.shape[0], -1)
+            self.compiled.block_sums(flat, depth, self.abs_ys, self.abs_xs, sums)
             return sums.astype(np.float64) / (765.0 if crop.ndim == 3 else 255.0) / self.divisor
         if crop.ndim == 3:
             rows = crop.reshape(self.by * self.out_y * self.out_x, self.bx * 3)
