@@ -68,6 +68,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.errors import InputFileError
+from cogmap_core.frontend.compiled import kernels
 from cogmap_core.frontend.config import FrontEndConfig
 
 _INITIAL_CAPACITY = 256
@@ -150,10 +151,16 @@ class MatchResult:
         return self.template_id >= 0
 
 
+def _block_edges(n: int, block: int) -> NDArray[np.intp]:
+    """Edges of consecutive runs of (about) ``block`` elements covering ``0 .. n``."""
+    count = max(1, round(n / block))
+    return np.linspace(0, n, count + 1).round().astype(np.intp)
+
+
 def _block_matrix(n: int, block: int, dtype: type[np.floating[Any]]) -> NDArray[Any]:
     """0/1 matrix ``(n_blocks, n)`` summing consecutive runs of (about) ``block`` elements."""
-    count = max(1, round(n / block))
-    edges = np.linspace(0, n, count + 1).round().astype(np.intp)
+    edges = _block_edges(n, block)
+    count = len(edges) - 1
     m = np.zeros((count, n), dtype=dtype)
     for b in range(count):
         m[b, edges[b] : edges[b + 1]] = 1.0
@@ -205,6 +212,9 @@ class LocalViewCells:
         self._dtype = dt
         self._l1 = (_block_matrix(self._y, 10, dt), _block_matrix(self._width, 13, dt).T.copy())
         self._l2 = (_block_matrix(self._y, 4, dt), _block_matrix(self._width, 4, dt).T.copy())
+        self._edges1 = (_block_edges(self._y, 10), _block_edges(self._width, 13))
+        self._edges2 = (_block_edges(self._y, 4), _block_edges(self._width, 4))
+        self._compiled = kernels()
         self._k1 = self._l1[0].shape[0] * self._l1[1].shape[1]
         self._k2 = self._l2[0].shape[0] * self._l2[1].shape[1]
         self._ones1 = np.ones(self._k1, dtype=dt)
@@ -383,6 +393,8 @@ class LocalViewCells:
         count = self._count
         if count == 0:
             return MatchResult(-1, -1, -1, 0)
+        if self._compiled is not None:
+            return self._match_compiled(view, hint)
         n_off = self._n_off
         centre = view[:, self._shift : self._shift + self._width]
         bound = self.max_sad
@@ -437,6 +449,36 @@ class LocalViewCells:
         best = int(flat[sads == best_sad].min())
         t, o = divmod(best, n_off)
         return MatchResult(t, int(self._offsets[o]), best_sad, evaluated)
+
+    def _match_compiled(self, view: NDArray[Any], hint: int | None) -> MatchResult:
+        """:meth:`match` as one compiled loop (:mod:`cogmap_core.frontend.compiled`)."""
+        t, o, sad, evaluated = self._compiled.match_pairs(
+            view,
+            self._templates,
+            self._count,
+            self._shift,
+            self._width,
+            self._offsets,
+            self._sums,
+            self._mean_skip,
+            self._mean_limit,
+            -1 if hint is None else hint,
+            self.max_sad,
+            self._edges1,
+            self._edges2,
+            self._signs,
+            self._keys,
+            self._ids,
+            self._sorted1,
+            self._indexed,
+            self._keys_all,
+            self._desc1.reshape(-1, self._k1),
+            self._desc2.reshape(-1, self._k2),
+            _LEVEL2_MIN,
+        )
+        if t < 0:
+            return MatchResult(-1, -1, -1, int(evaluated))
+        return MatchResult(int(t), int(self._offsets[o]), int(sad), int(evaluated))
 
     def match_exhaustive(self, template: NDArray[np.uint8]) -> MatchResult:
         """Search exhaustively: exact SAD of all (template, offset) pairs, best within threshold."""
@@ -521,6 +563,9 @@ class _BlockPlan:
         # block corners in the integral image of the used part
         self.ys = np.arange(out_y + 1) * self.by
         self.xs = np.arange(out_x + 1) * self.bx
+        self.compiled = kernels()
+        self.abs_ys = self.ys + y0
+        self.abs_xs = self.xs + x0
 
     def resample(self, image: NDArray[np.uint8]) -> NDArray[np.float64]:
         """Block means in [0, 1]: ``sum / 255 / pixels`` as OpenRatSLAM divides.
@@ -528,9 +573,16 @@ class _BlockPlan:
         The block sums are exact integers, from the integral image (OpenCV's, in float64: exact
         up to 2^53). A colour image's blocks sum blue, green and red, divided by ``255 * 3``
         then by the pixels (OpenRatSLAM's ``bgr8`` branch): each block's ``bx * 3`` bytes of a
-        row summed at once (``cv2.reduce``, in 32-bit integers), then its ``by`` rows.
+        row summed at once (``cv2.reduce``, in 32-bit integers), then its ``by`` rows. With
+        numba, one compiled loop adds the same integers (:mod:`cogmap_core.frontend.compiled`).
         """
         crop = image[self.rows, self.cols]
+        if self.compiled is not None:
+            sums = np.empty((self.out_y, self.out_x), dtype=np.int64)
+            depth = 3 if image.ndim == 3 else 1
+            flat = np.ascontiguousarray(image).reshape(image.shape[0], -1)
+            self.compiled.block_sums(flat, depth, self.abs_ys, self.abs_xs, sums)
+            return sums.astype(np.float64) / (765.0 if crop.ndim == 3 else 255.0) / self.divisor
         if crop.ndim == 3:
             rows = crop.reshape(self.by * self.out_y * self.out_x, self.bx * 3)
             per_row = cv2.reduce(rows, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S)

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from cogmap_core.frontend.compiled import kernels
 from cogmap_core.frontend.config import FrontEndConfig
 
 FloatArray = NDArray[np.float64]
@@ -91,6 +92,10 @@ class PoseCellNetwork:
         angle_th = (np.arange(self.n_th) + 1.0) * 2.0 * math.pi / self.n_th
         self._sincos_xy = np.stack([np.sin(angle_xy), np.cos(angle_xy)], axis=1).tolist()
         self._sincos_th = np.stack([np.sin(angle_th), np.cos(angle_th)], axis=1).tolist()
+        self._sincos_xy_array = np.array(self._sincos_xy)
+        self._sincos_th_array = np.array(self._sincos_th)
+        # compiled decoding while the averaged cells are distinct (ordered as its loops visit them)
+        self._compiled = kernels() if 2 * c + 1 <= min(self.n_xy, self.n_th) else None
         self.cells = np.zeros((self.n_th, self.n_xy, self.n_xy))
         bx = by = self.n_xy // 2
         bth = self.n_th // 2
@@ -196,6 +201,11 @@ class PoseCellNetwork:
         cosine sums over the cells in index order (sequential sums, as its loops).
         """
         p = self.cells
+        if self._compiled is not None and p.flags.c_contiguous:
+            self.best = self._compiled.decode_peak(
+                p, self.config.pc_cells_to_avg, self._sincos_xy_array, self._sincos_th_array
+            )
+            return self.best
         k, j, i = np.unravel_index(int(np.argmax(p)), p.shape)
         off = self._avg_offsets
         ith = (k + off) % self.n_th
