@@ -20,9 +20,10 @@ edges just removed) -- when
    older than its first vertex; neither belongs to the run);
 2. the links that bracket the run agree with the map: their residuals, weighed as the
    optimiser weighs them, are at most ``integration_max_residual`` (an edge the optimisation
-   could not satisfy is no evidence). That is the closing link, and, when a link alone
-   re-localised the robot where the run began (below), that link too: a false match that
-   opened a run says nothing about where its vertices belong; and
+   could not satisfy is no evidence). That is the closing link; and, when a link alone
+   re-localised the robot where the run began (below), that link must be one the loop-closure
+   model keeps -- its residual within the model's scale (``loop_scale`` link sigmas) -- since a
+   false match that opened a run says nothing about where its vertices belong; and
 3. every vertex of the run lies within ``integration_radius`` of an edge of known ground (an
    edge whose vertices are at least ``integration_min_age`` older than the run): the run
    re-walked mapped corridors.
@@ -247,9 +248,8 @@ class SceneIntegration:
 
 def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:
     """Whether the links that bracket the run agree with the map (condition 2, module doc)."""
-    limit = params.integration_max_residual
     closing = _link_residual(graph, run.vertices[-1], run.end, run.closing, params)
-    if closing > limit:
+    if closing > params.integration_max_residual:
         return False
     if run.opened_from < 0:
         return True  # opened where the robot was set (or where it drove on from)
@@ -260,7 +260,10 @@ def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:
     if graph.edge_from[k] != robot:
         robot, place = place, robot
     opening = tuple(graph.edge_rel[k].tolist())
-    return _link_residual(graph, robot, place, opening, params) <= limit
+    # it need not have converged (the run's end is judged by the closing link): it must only be
+    # a link the loop model keeps, within its scale
+    rejected_past = params.loop_scale * params.link_sigma_position
+    return _link_residual(graph, robot, place, opening, params) <= rejected_past
 
 
 def _link_residual(
