@@ -547,12 +547,14 @@ def test_the_session_format_knows_every_attribute() -> None:
         "_n_off", "_offsets", "_ones1", "_ones2", "_pixels", "_plans", "_query",
         "_rad_per_column", "_shift", "_signs", "_sorted1", "_templates", "_width", "_windows",
         "_x", "_y", "_blocks", "value_scale", "_mean_skip", "_mean_limit", "_sums",
+        "_edges1", "_edges2", "_compiled",
     }  # fmt: skip
     # saved: cells and best; the rest follows from the settings
     assert set(vars(PoseCellNetwork(config))) == {
         "config", "cells", "best", "n_th", "n_xy", "th_size", "_avg_offsets", "_cos",
         "_cos_sin", "_e_th_t", "_e_xy", "_e_xy_t", "_i_th_t", "_i_xy", "_i_xy_t", "_perm_th_t",
         "_perm_xy", "_sin", "_sincos_th", "_sincos_xy", "_edge_loss",
+        "_sincos_th_array", "_sincos_xy_array", "_compiled",
     }  # fmt: skip
 
 
