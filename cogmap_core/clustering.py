@@ -14,6 +14,20 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 
+def joins(
+    start_time: float, last_time: float, time: float, t_interval: float, t_total: float
+) -> bool:
+    """The clustering rule: whether an edge at ``time`` joins the cluster opened at ``start_time``.
+
+    True when the edge comes less than ``t_interval`` after the cluster's latest edge (at
+    ``last_time``) and no more than ``t_total`` after its first. When it is false for an event
+    at ``time``, the cluster is closed. This is the rule's one definition: the map's clusterer,
+    the map's fast odometry path, the rebuild planner's schedule and the compiled replay (which
+    compiles this very function) all call it. Plain arithmetic on floats, so numba compiles it.
+    """
+    return time - last_time < t_interval and time - start_time <= t_total
+
+
 @dataclass(slots=True)
 class Cluster:
     """One cluster of loop-closure edges.
@@ -53,9 +67,7 @@ class LoopClosureClusterer:
         return self._open
 
     def _accepts(self, cluster: Cluster, time: float) -> bool:
-        return (time - cluster.last_time < self.t_interval) and (
-            time - cluster.start_time <= self.t_total
-        )
+        return joins(cluster.start_time, cluster.last_time, time, self.t_interval, self.t_total)
 
     def due(self, time: float) -> Cluster | None:
         """Close and return the open cluster if an edge at ``time`` could no longer join it."""

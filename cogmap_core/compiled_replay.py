@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from cogmap_core.clustering import joins as _joins  # (compiled by _load, as its own)
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.event_file import columns_to_events, events_to_columns
 from cogmap_core.events import (
@@ -287,8 +288,8 @@ def _replay(
         t = time[k]
         if not (t >= fs[F_LAST_TIME] and t != math.inf):
             return k  # the contract error is raised by the Python code
-        if st[I_CLUSTER_OPEN] == 1 and not (
-            t - fs[F_CLUSTER_LAST] < fs[F_T_INTERVAL] and t - fs[F_CLUSTER_START] <= fs[F_T_TOTAL]
+        if st[I_CLUSTER_OPEN] == 1 and not _joins(
+            fs[F_CLUSTER_START], fs[F_CLUSTER_LAST], t, fs[F_T_INTERVAL], fs[F_T_TOTAL]
         ):
             return k  # the cluster closes: optimisation
         what = kind[k]
@@ -486,6 +487,7 @@ _hypot = _python_hypot  # until _load() compiles it
 #: The functions compiled by :func:`_load` (each module global is replaced by its compiled self).
 _COMPILED = (
     "_wrap",
+    "_joins",
     "_pair_key",
     "_slot",
     "_table_insert",

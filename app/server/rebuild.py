@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core import compiled_replay
+from cogmap_core.clustering import joins
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_file import KIND_LINK
@@ -249,7 +250,7 @@ def cluster_schedule(
     index, the index of the event at which it closes -- ``end`` when it closes at the end of the
     data, -1 when it is still open). Two parameter sets with the same schedule build the same
     map when they differ only in ``t_interval`` and ``t_total``
-    (:class:`~cogmap_core.clustering.LoopClosureClusterer` semantics, reproduced exactly).
+    (the rule of :func:`~cogmap_core.clustering.joins`, which the map's clusterer applies).
     """
     links = link_index[link_index < end]
     if links.size == 0:
@@ -259,7 +260,7 @@ def cluster_schedule(
     start = last = t_links[0]
     for i in range(1, len(t_links)):
         t = t_links[i]
-        if t - last < t_interval and t - start <= t_total:
+        if joins(start, last, t, t_interval, t_total):
             last = t
         else:
             starts.append(i)
@@ -270,31 +271,33 @@ def cluster_schedule(
     for c in range(len(starts)):
         first, last_link = index[bounds[c]], index[bounds[c + 1] - 1]
         t_start, t_last = float(times[first]), float(times[last_link])
-        close = min(
-            _first_past(times, last_link + 1, end, t_last, t_interval, inclusive=True),
-            _first_past(times, last_link + 1, end, t_start, t_total, inclusive=False),
-        )
+        close = _first_closing(times, last_link + 1, end, t_start, t_last, t_interval, t_total)
         if close >= end:
             close = end if finish else -1
         out.append((first, last_link, close))
     return tuple(out)
 
 
-def _first_past(
-    times: NDArray[np.float64], lo: int, hi: int, since: float, limit: float, inclusive: bool
+def _first_closing(
+    times: NDArray[np.float64],
+    lo: int,
+    hi: int,
+    t_start: float,
+    t_last: float,
+    t_interval: float,
+    t_total: float,
 ) -> int:
-    """The first index in ``[lo, hi)`` with ``t - since >= limit`` (``>`` unless ``inclusive``).
+    """The first index in ``[lo, hi)`` whose time closes the cluster (``hi`` when there is none).
 
-    Evaluated exactly as the clusterer does (a difference of two floats); times do not decrease,
-    so the predicate is monotonic and a binary search finds it. ``hi`` when there is none.
+    The clustering rule (:func:`~cogmap_core.clustering.joins`) evaluated as the clusterer does;
+    times do not decrease, so "no longer joins" is monotonic and a binary search finds it.
     """
     while lo < hi:
         mid = (lo + hi) // 2
-        gap = float(times[mid]) - since
-        if gap >= limit if inclusive else gap > limit:
-            hi = mid
-        else:
+        if joins(t_start, t_last, float(times[mid]), t_interval, t_total):
             lo = mid + 1
+        else:
+            hi = mid
     return lo
 
 
