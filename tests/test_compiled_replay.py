@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from app.server import rebuild
-from app.server.rebuild import BuildTask, build_map_resumed, schedule_divergence
+from app.server.rebuild import BuildTask, build_map_resumed
+from app.server.schedule import schedule_divergence
 from cogmap_core import compiled_loop, compiled_replay, numba_cache
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
