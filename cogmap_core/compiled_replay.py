@@ -454,6 +454,7 @@ __all__ = [
     "ENV_SWITCH",
     "CompiledReplay",
     "available",
+    "choose_cache",  # re-exported: cogmap_core.frontend.compiled imports it from here
     "replay",
     "unavailable_reason",
 ]
