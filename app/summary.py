@@ -29,7 +29,7 @@ from cogmap_core.slam import (
     optimisation_summary,
 )
 from cogmap_core.sources.detect import Source
-from cogmap_core.sources.odometry_log import LogReader
+from cogmap_core.sources.log_reader import LogReader
 
 #: The order of the maps in every report (the session's: standard, scene integration, compact).
 MAP_ORDER: tuple[MapMode, ...] = ALL_MODES

@@ -112,7 +112,7 @@ def read_in_child(path: Path) -> tuple[float, float, float, int, int]:
 
 def lecture_hall(source: Path) -> None:
     """Best-of-5 read time of the real file and hashes of what it becomes."""
-    from cogmap_core.sources.odometry_log import LogReader
+    from cogmap_core.sources.log_reader import LogReader
     from cogmap_core.sources.tuc import read_tuc
 
     best = float("inf")

@@ -40,12 +40,8 @@ from cogmap_core.config import MapParams
 from cogmap_core.evaluation import absolute_trajectory_error, dead_reckoning
 from cogmap_core.slam import SlamSession
 from cogmap_core.sources.detect import LogOptions, open_source
-from cogmap_core.sources.odometry_log import (
-    LOG_EVALUATION,
-    LOG_MAP_PARAMS,
-    LogReader,
-    LogSourceConfig,
-)
+from cogmap_core.sources.log_reader import LogReader
+from cogmap_core.sources.odometry_log import LOG_EVALUATION, LOG_MAP_PARAMS, LogSourceConfig
 
 RADIUS = LOG_EVALUATION.layout_radius
 """Layout fidelity and growth are judged at the input kind's radius (0.5 m)."""

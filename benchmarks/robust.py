@@ -174,9 +174,9 @@ def part_b(quick: bool) -> list[float]:
     """Generated logs: each map against the map of the true links alone and dead reckoning."""
     from cogmap_core.datasets.cache import cache_dir
     from cogmap_core.sources.detect import LogOptions, open_source
+    from cogmap_core.sources.log_reader import LogReader
     from cogmap_core.sources.odometry_log import (
         LOG_MAP_PARAMS,
-        LogReader,
         LogSourceConfig,
         label_loop_candidates,
     )

@@ -13,6 +13,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+from numpy.typing import NDArray
+
+
+def joins(
+    start_time: float, last_time: float, time: float, t_interval: float, t_total: float
+) -> bool:
+    """The clustering rule: whether an edge at ``time`` joins the cluster opened at ``start_time``.
+
+    True when the edge comes less than ``t_interval`` after the cluster's latest edge (at
+    ``last_time``) and no more than ``t_total`` after its first. When it is false for an event
+    at ``time``, the cluster is closed. This is the rule's one definition: the map's clusterer,
+    the map's fast odometry path, the rebuild planner's schedule and the compiled replay (which
+    compiles this very function) all call it. Plain arithmetic on floats, so numba compiles it.
+    """
+    return time - last_time < t_interval and time - start_time <= t_total
+
 
 @dataclass(slots=True)
 class Cluster:
@@ -53,9 +70,7 @@ class LoopClosureClusterer:
         return self._open
 
     def _accepts(self, cluster: Cluster, time: float) -> bool:
-        return (time - cluster.last_time < self.t_interval) and (
-            time - cluster.start_time <= self.t_total
-        )
+        return joins(cluster.start_time, cluster.last_time, time, self.t_interval, self.t_total)
 
     def due(self, time: float) -> Cluster | None:
         """Close and return the open cluster if an edge at ``time`` could no longer join it."""
@@ -91,3 +106,69 @@ class LoopClosureClusterer:
             cluster.closed_time = time
             self._open = None
         return cluster
+
+
+def cluster_schedule(
+    times: NDArray[np.float64],
+    link_index: NDArray[np.int64],
+    end: int,
+    finish: bool,
+    t_interval: float,
+    t_total: float,
+) -> tuple[tuple[int, int, int], ...]:
+    """The loop-closure cluster schedule of ``events[:end]``, as a map's clusterer makes it.
+
+    ``times`` are the data times of all events, ``link_index`` the positions of the links among
+    them (ascending). Returns, per cluster, (its first link's event index, its last link's event
+    index, the index of the event at which it closes -- ``end`` when it closes at the end of the
+    data, -1 when it is still open). Two parameter sets with the same schedule build the same
+    map when they differ only in ``t_interval`` and ``t_total``
+    (the rule of :func:`joins`, which :class:`LoopClosureClusterer` applies).
+    """
+    links = link_index[link_index < end]
+    if links.size == 0:
+        return ()
+    t_links = times[links].tolist()
+    starts = [0]
+    start = last = t_links[0]
+    for i in range(1, len(t_links)):
+        t = t_links[i]
+        if joins(start, last, t, t_interval, t_total):
+            last = t
+        else:
+            starts.append(i)
+            start = last = t
+    bounds = starts + [len(t_links)]
+    index = links.tolist()
+    out: list[tuple[int, int, int]] = []
+    for c in range(len(starts)):
+        first, last_link = index[bounds[c]], index[bounds[c + 1] - 1]
+        t_start, t_last = float(times[first]), float(times[last_link])
+        close = _first_closing(times, last_link + 1, end, t_start, t_last, t_interval, t_total)
+        if close >= end:
+            close = end if finish else -1
+        out.append((first, last_link, close))
+    return tuple(out)
+
+
+def _first_closing(
+    times: NDArray[np.float64],
+    lo: int,
+    hi: int,
+    t_start: float,
+    t_last: float,
+    t_interval: float,
+    t_total: float,
+) -> int:
+    """The first index in ``[lo, hi)`` whose time closes the cluster (``hi`` when there is none).
+
+    The clustering rule (:func:`joins`) evaluated as the clusterer does;
+    times do not decrease, so "no longer joins" is monotonic and a binary search finds it.
+    """
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if joins(t_start, t_last, float(times[mid]), t_interval, t_total):
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo

@@ -45,7 +45,7 @@ from enum import StrEnum
 import numpy as np
 from numpy.typing import NDArray
 
-from cogmap_core.clustering import Cluster, LoopClosureClusterer
+from cogmap_core.clustering import Cluster, LoopClosureClusterer, joins
 from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
@@ -271,9 +271,8 @@ class CognitiveMap:
                 self.apply(event)  # raises the contract error
                 continue
             cluster = clusterer.open_cluster
-            if cluster is not None and (
-                t - cluster.last_time >= clusterer.t_interval
-                or t - cluster.start_time > clusterer.t_total
+            if cluster is not None and not joins(
+                cluster.start_time, cluster.last_time, t, clusterer.t_interval, clusterer.t_total
             ):
                 self.apply(event)  # closes the cluster: optimisation and integration
                 continue

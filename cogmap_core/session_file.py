@@ -32,30 +32,26 @@ load with no scores.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from cogmap_core import __version__
-from cogmap_core.clustering import Cluster, LoopClosureClusterer
-from cogmap_core.cognitive_map import CognitiveMap, MapCounters, MapMode, OptimizationRecord
+from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.errors import ParameterError
 from cogmap_core.event_log import EventLog
 from cogmap_core.fileio import atomic_writer, load_archive
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.frontend.config import COGMAP_ARITHMETIC
 from cogmap_core.frontend.local_view import MatchResult, ViewMatch
 from cogmap_core.frontend.pose_cells import _ViewCell
-from cogmap_core.map_graph import MapGraph, grow_array
-from cogmap_core.relocalisation import RelocalisationCheck, RelocalisationGate
-from cogmap_core.scene_integration import KnownEdges, RevisitRun, SceneIntegration
+from cogmap_core.session_arrays import Arrays, Json, SessionError, load_lists, save_lists
+from cogmap_core.session_map import load_map, save_map
 from cogmap_core.slam import SlamSession
 
 FORMAT_NAME = "cogmap-session"
@@ -63,13 +59,6 @@ FORMAT_VERSION = 1
 
 RESUME_GAP_S = 1.0
 """A bag whose clock does not continue the session's starts this long (s) after its end."""
-
-Arrays = dict[str, NDArray[Any]]
-Json = dict[str, Any]
-
-
-class SessionError(InputFileError):
-    """A session file cannot be used: unreadable, corrupt, another version, other settings."""
 
 
 @dataclass
@@ -140,7 +129,7 @@ def _collect(session: SlamSession) -> tuple[Json, Arrays]:
     _save_log(session.log, arrays)
     state["maps"] = {}
     for mode, cmap in session.maps.maps.items():
-        state["maps"][mode.value] = _save_map(cmap, f"map.{mode.value}.", arrays)
+        state["maps"][mode.value] = save_map(cmap, f"map.{mode.value}.", arrays)
     return state, arrays
 
 
@@ -178,7 +167,7 @@ def _save_frontend(frontend: FrontEnd, state: Json, arrays: Arrays) -> None:
     arrays["frontend.view_cell_decay_frame"] = np.array(
         [v.decay_frame for v in views], dtype=np.int64
     )
-    _save_lists(arrays, "frontend.view_cell_experiences", [v.experiences for v in views])
+    save_lists(arrays, "frontend.view_cell_experiences", [v.experiences for v in views])
     arrays["frontend.experiences"] = np.array(pc._experiences, dtype=np.float64).reshape(-1, 3)
     arrays["frontend.experience_view"] = np.array(pc._experience_vt, dtype=np.int64)
 
@@ -192,126 +181,6 @@ def _save_log(log: EventLog, arrays: Arrays) -> None:
     truth = np.zeros((log.frames, 3))
     truth[log.has_truth] = log.ground_truth
     arrays["log.truth"] = truth
-
-
-def _save_map(cmap: CognitiveMap, prefix: str, arrays: Arrays) -> Json:
-    g = cmap.graph
-    n, m = g.num_ids, g.num_edges_total
-    for name in ("pose", "vertex_time", "view", "alive", "alias", "alias_offset"):
-        arrays[prefix + "graph." + name] = getattr(g, name)[:n].copy()
-    for name in ("from", "to", "rel", "time", "kind", "cluster", "alive"):
-        arrays[prefix + "graph.edge_" + name] = getattr(g, "edge_" + name)[:m].copy()
-    # adjacency in each dict's own order: merges and short-edge removal iterate it
-    counts = np.array([len(a) for a in g.adjacency], dtype=np.int64)
-    arrays[prefix + "adjacency.count"] = counts
-    arrays[prefix + "adjacency.neighbour"] = np.fromiter(
-        (w for a in g.adjacency for w in a), dtype=np.int64, count=int(counts.sum())
-    )
-    arrays[prefix + "adjacency.edge"] = np.fromiter(
-        (k for a in g.adjacency for k in a.values()), dtype=np.int64, count=int(counts.sum())
-    )
-    _save_lists(arrays, prefix + "absorbed", g._absorbed)
-    clusters = cmap.clusterer.clusters
-    open_cluster = cmap.clusterer.open_cluster
-    if open_cluster is not None and (not clusters or clusters[-1] is not open_cluster):
-        raise ValueError("the open cluster is not the newest one; cannot save the clusterer")
-    arrays[prefix + "clusters.start_time"] = np.array([c.start_time for c in clusters])
-    arrays[prefix + "clusters.last_time"] = np.array([c.last_time for c in clusters])
-    arrays[prefix + "clusters.edge_count"] = np.array(
-        [c.edge_count for c in clusters], dtype=np.int64
-    )
-    arrays[prefix + "clusters.closed_time"] = np.array(
-        [math.nan if c.closed_time is None else c.closed_time for c in clusters]
-    )
-    integration = cmap.integration
-    known = integration._known
-    if known is not None:
-        for name in ("start", "end", "ends", "newest"):
-            arrays[prefix + "known_edges." + name] = getattr(known, name).copy()
-    _save_records(arrays, prefix + "optimizations.", cmap.optimizations, OptimizationRecord)
-    _save_records(arrays, prefix + "refused.", cmap.refused, RelocalisationCheck)
-    _save_records(
-        arrays,
-        prefix + "accepted_by_consensus.",
-        cmap.gate.accepted_by_consensus,
-        RelocalisationCheck,
-    )
-    times, vertices, edges = cmap.size_history()
-    arrays[prefix + "size_history.time"] = times
-    arrays[prefix + "size_history.vertices"] = vertices
-    arrays[prefix + "size_history.edges"] = edges
-    return {
-        "mode": cmap.mode.value,
-        "params": cmap.params.to_dict(),
-        "graph": {
-            "num_ids": n,
-            "num_edges_total": m,
-            "num_vertices": g.num_vertices,
-            "num_edges": g.num_edges,
-            "num_loop_edges": g.num_loop_edges,
-        },
-        "open_cluster": open_cluster is not None,
-        "integration": {
-            "open": None if integration.open is None else _run_json(integration.open),
-            "pending": [_run_json(run) for run in integration.pending],
-            "relocalised_at": None
-            if integration._relocalised_at is None
-            else list(integration._relocalised_at),
-            "known_edges": None
-            if known is None
-            else {"reach": known.reach, "radius": known.radius, "tree": known.tree is not None},
-        },
-        "streak": [_check_json(c) for c in cmap.gate.streak],
-        "counters": asdict(cmap.counters),
-        "robot": {
-            "current": cmap._current,
-            "accum": list(cmap._accum),
-            "travelled": cmap._travelled,
-            "last_rotation": cmap._last_rotation,
-            "last_time": cmap._last_time,
-            "last_link": None if cmap._last_link is None else list(cmap._last_link),
-        },
-        "edges_at_last_optimization": cmap._edges_at_last_optimization,
-        "optimized_once": cmap._optimized_once,
-    }
-
-
-def _save_records(arrays: Arrays, prefix: str, records: list[Any], kind: type) -> None:
-    """A list of flat dataclass records as one array per field (tuples as ``(n, k)``)."""
-    for f in fields(kind):
-        values = [getattr(r, f.name) for r in records]
-        if f.name == "correction":
-            arrays[prefix + f.name] = np.array(values, dtype=np.float64).reshape(-1, 3)
-        elif f.type in ("int", "bool"):
-            arrays[prefix + f.name] = np.array(values, dtype=np.int64 if f.type == "int" else bool)
-        else:
-            arrays[prefix + f.name] = np.array(values, dtype=np.float64)
-
-
-def _save_lists(arrays: Arrays, prefix: str, lists: list[list[int]]) -> None:
-    counts = np.array([len(x) for x in lists], dtype=np.int64)
-    arrays[prefix + ".count"] = counts
-    arrays[prefix + ".items"] = np.fromiter(
-        (v for x in lists for v in x), dtype=np.int64, count=int(counts.sum())
-    )
-
-
-def _run_json(run: RevisitRun) -> Json:
-    return {
-        "start": run.start,
-        "opened_from": run.opened_from,
-        "vertices": list(run.vertices),
-        "created": run.created,
-        "end": run.end,
-        "closing": list(run.closing),
-        "closed": run.closed,
-    }
-
-
-def _check_json(check: RelocalisationCheck) -> Json:
-    out = asdict(check)
-    out["correction"] = list(check.correction)
-    return out
 
 
 # ============================================================================ reading
@@ -395,7 +264,7 @@ def _restore(header: Json, arrays: Arrays) -> tuple[SlamSession, SessionMeta]:
     if session.log.frames != header["frames"] or session.log.event_count != header["events"]:
         raise SessionError("the event log does not match the header")
     for mode in modes:
-        session.maps.maps[mode] = _load_map(state["maps"][mode.value], f"map.{mode.value}.", arrays)
+        session.maps.maps[mode] = load_map(state["maps"][mode.value], f"map.{mode.value}.", arrays)
     session.finished = bool(header["finished"])
     meta = SessionMeta(
         epoch=float(header["epoch"]),
@@ -426,7 +295,7 @@ def _load_frontend(config: FrontEndConfig, s: Json, arrays: Arrays) -> FrontEnd:
     pose = arrays["frontend.view_cell_pose"].tolist()
     decay = arrays["frontend.view_cell_decay"].tolist()
     decay_frame = arrays["frontend.view_cell_decay_frame"].tolist()
-    experiences = _load_lists(arrays, "frontend.view_cell_experiences")
+    experiences = load_lists(arrays, "frontend.view_cell_experiences")
     pc._views = [
         _ViewCell(p[0], p[1], p[2], d, f, e)
         for p, d, f, e in zip(pose, decay, decay_frame, experiences, strict=True)
@@ -456,174 +325,6 @@ def _load_log(arrays: Arrays) -> EventLog:
         arrays["log.truth"],
         arrays["log.has_truth"],
     )
-
-
-def _load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
-    cmap = CognitiveMap(MapMode(s["mode"]), MapParams.from_dict(s["params"]))
-    g = MapGraph()
-    sizes = s["graph"]
-    n, m = int(sizes["num_ids"]), int(sizes["num_edges_total"])
-    for name in ("pose", "vertex_time", "view", "alive", "alias", "alias_offset"):
-        fill = -1 if name == "alias" else 0
-        setattr(g, name, _graph_array(arrays, prefix + "graph." + name, getattr(g, name), n, fill))
-    for name in ("from", "to", "rel", "time", "kind", "cluster", "alive"):
-        fill = -1 if name == "cluster" else 0
-        key = prefix + "graph.edge_" + name
-        setattr(g, "edge_" + name, _graph_array(arrays, key, getattr(g, "edge_" + name), m, fill))
-    g.num_ids, g.num_edges_total = n, m
-    g.num_vertices = int(sizes["num_vertices"])
-    g.num_edges = int(sizes["num_edges"])
-    g.num_loop_edges = int(sizes["num_loop_edges"])
-    counts = arrays[prefix + "adjacency.count"].tolist()
-    neighbours = arrays[prefix + "adjacency.neighbour"].tolist()
-    edges = arrays[prefix + "adjacency.edge"].tolist()
-    if len(counts) != n or sum(counts) != len(neighbours):
-        raise SessionError(f"{prefix}adjacency does not match the graph")
-    g.adjacency = []
-    start = 0
-    for c in counts:
-        pairs = zip(neighbours[start : start + c], edges[start : start + c], strict=True)
-        g.adjacency.append(dict(pairs))
-        start += c
-    g._absorbed = _load_lists(arrays, prefix + "absorbed")
-    if len(g._absorbed) != n:
-        raise SessionError(f"{prefix}aliases do not match the graph")
-    if int(np.count_nonzero(g.alive[:n])) != g.num_vertices:
-        raise SessionError(f"{prefix}graph's live vertices do not match its header")
-    cmap.graph = g
-
-    clusterer = LoopClosureClusterer(cmap.params.t_interval, cmap.params.t_total)
-    closed = arrays[prefix + "clusters.closed_time"].tolist()
-    clusterer.clusters = [
-        Cluster(k, a, b, c, None if math.isnan(d) else d)
-        for k, (a, b, c, d) in enumerate(
-            zip(
-                arrays[prefix + "clusters.start_time"].tolist(),
-                arrays[prefix + "clusters.last_time"].tolist(),
-                arrays[prefix + "clusters.edge_count"].tolist(),
-                closed,
-                strict=True,
-            )
-        )
-    ]
-    if s["open_cluster"]:
-        clusterer._open = clusterer.clusters[-1]
-    cmap.clusterer = clusterer
-
-    integration = SceneIntegration()
-    si = s["integration"]
-    integration.open = None if si["open"] is None else _run_from_json(si["open"])
-    integration.pending = [_run_from_json(r) for r in si["pending"]]
-    at = si.get("relocalised_at")  # absent from files of before it existed: no pending one
-    integration._relocalised_at = None if at is None else (int(at[0]), int(at[1]))
-    if si["known_edges"] is not None:
-        known = KnownEdges.__new__(KnownEdges)
-        for name in ("start", "end", "ends", "newest"):
-            setattr(known, name, arrays[prefix + "known_edges." + name])
-        known.reach = float(si["known_edges"]["reach"])
-        known.radius = float(si["known_edges"]["radius"])
-        # the same midpoints build the same tree
-        known.tree = cKDTree(0.5 * (known.start + known.end)) if si["known_edges"]["tree"] else None
-        integration._known = known
-    cmap.integration = integration
-
-    gate = RelocalisationGate()
-    gate.streak = [_check_from_json(c) for c in s["streak"]]
-    gate.accepted_by_consensus = _load_records(  # type: ignore[assignment]
-        arrays, prefix + "accepted_by_consensus.", RelocalisationCheck
-    )
-    cmap.gate = gate
-    cmap.optimizations = _load_records(  # type: ignore[assignment]
-        arrays, prefix + "optimizations.", OptimizationRecord
-    )
-    cmap.refused = _load_records(arrays, prefix + "refused.", RelocalisationCheck)  # type: ignore[assignment]
-    cmap.counters = MapCounters(**s["counters"])
-    _check_counters(cmap, prefix)
-    robot = s["robot"]
-    cmap._current = int(robot["current"])
-    cmap._accum = [float(v) for v in robot["accum"]]
-    cmap._travelled = float(robot["travelled"])
-    cmap._last_rotation = float(robot["last_rotation"])
-    cmap._last_time = float(robot["last_time"])
-    link = robot["last_link"]
-    cmap._last_link = None if link is None else (float(link[0]), int(link[1]), bool(link[2]))
-    cmap._edges_at_last_optimization = int(s["edges_at_last_optimization"])
-    cmap._optimized_once = bool(s["optimized_once"])
-    cmap._hist_time = arrays[prefix + "size_history.time"].tolist()
-    cmap._hist_vertices = arrays[prefix + "size_history.vertices"].tolist()
-    cmap._hist_edges = arrays[prefix + "size_history.edges"].tolist()
-    return cmap
-
-
-def _check_counters(cmap: CognitiveMap, prefix: str) -> None:
-    """Refuse counters that do not add up with the loaded graph (they are shown, never derived).
-
-    Every proposal made an id; every id that is not a live vertex was declined, integrated or
-    removed as a short edge; every refused relocalisation is on record.
-    """
-    counters, graph = cmap.counters, cmap.graph
-    removed = counters.declined + counters.integrated + counters.short_edges
-    if (
-        counters.proposed != graph.num_ids
-        or removed != graph.num_ids - graph.num_vertices
-        or counters.refused_relocalisations != len(cmap.refused)
-    ):
-        raise SessionError(f"{prefix}counters do not match the graph")
-
-
-def _graph_array(
-    arrays: Arrays, name: str, empty: NDArray[Any], rows: int, fill: int
-) -> NDArray[Any]:
-    """Saved array ``name`` (``rows`` rows) as a graph array like ``empty`` (a new graph's).
-
-    Grown as the graph grows its own: at least ``empty``'s capacity, the rows past ``rows``
-    holding ``fill``.
-    """
-    saved = arrays[name]
-    if saved.shape != (rows, *empty.shape[1:]):
-        raise SessionError(f"{name} does not match the graph")
-    return grow_array(saved.astype(empty.dtype, copy=False), max(empty.shape[0], rows), fill)
-
-
-def _load_records(arrays: Arrays, prefix: str, kind: type) -> list[Any]:
-    columns = {f.name: arrays[prefix + f.name].tolist() for f in fields(kind)}
-    count = len(next(iter(columns.values())))
-    if any(len(v) != count for v in columns.values()):
-        raise SessionError(f"{prefix[:-1]} records have columns of different lengths")
-    if "correction" in columns:
-        columns["correction"] = [tuple(c) for c in columns["correction"]]
-    return [kind(**{name: values[k] for name, values in columns.items()}) for k in range(count)]
-
-
-def _load_lists(arrays: Arrays, prefix: str) -> list[list[int]]:
-    counts = arrays[prefix + ".count"].tolist()
-    items = arrays[prefix + ".items"].tolist()
-    if sum(counts) != len(items):
-        raise SessionError(f"{prefix} lists do not match their counts")
-    out = []
-    start = 0
-    for c in counts:
-        out.append(items[start : start + c])
-        start += c
-    return out
-
-
-def _run_from_json(s: Json) -> RevisitRun:
-    return RevisitRun(
-        start=int(s["start"]),
-        opened_from=int(s.get("opened_from", -1)),  # (absent from sessions saved before it)
-        vertices=[int(v) for v in s["vertices"]],
-        created=float(s["created"]),
-        end=int(s["end"]),
-        closing=tuple(float(v) for v in s["closing"]),  # type: ignore[arg-type]
-        closed=float(s["closed"]),
-    )
-
-
-def _check_from_json(s: Json) -> RelocalisationCheck:
-    values = dict(s)
-    values["correction"] = tuple(float(v) for v in s["correction"])
-    return RelocalisationCheck(**values)
 
 
 # ============================================================================ checks

@@ -16,8 +16,8 @@ import pytest
 from app.cli import main
 from cogmap_core.datasets import open_bag
 from cogmap_core.datasets.bag_writer import IratBagWriter
+from cogmap_core.datasets.clock_jumps import plan_clock_jumps
 from cogmap_core.datasets.jpeg import JpegDecoder
-from cogmap_core.datasets.rosbag_reader import plan_clock_jumps
 from cogmap_core.errors import ParameterError
 from tests.test_dataset_reader import T0, S, jpeg, simple_bag, write_bag
 from tests.test_faults import corrupt_mid_bag, one_line_error, snapshot

@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 
 from app.server import rebuild
-from app.server.rebuild import BuildTask, build_map_resumed, schedule_divergence
-from cogmap_core import compiled_replay
+from app.server.rebuild import BuildTask, build_map_resumed
+from app.server.schedule import schedule_divergence
+from cogmap_core import compiled_loop, compiled_replay, numba_cache
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError
@@ -191,7 +192,7 @@ def test_hypot_is_cpythons_to_the_last_bit() -> None:
     rng = np.random.default_rng(3)
     xs = np.concatenate([rng.normal(0, s, (20000, 2)) for s in (1e-300, 1e-4, 1.0, 1e4, 1e300)])
     xs = np.concatenate([xs, [[0.0, 0.0], [math.inf, math.nan], [math.nan, 1.0], [5e-324, 0.0]]])
-    got = compiled_replay._check(xs)[:, 0]
+    got = compiled_loop._check(xs)[:, 0]
     want = np.array([math.hypot(x, y) for x, y in xs.tolist()])
     np.testing.assert_array_equal(got, want)
 
@@ -200,24 +201,24 @@ def test_the_numba_cache_goes_where_it_can_be_written(tmp_path: Path) -> None:
     source = tmp_path / "site" / "__pycache__"
     home = tmp_path / "home"
     env: dict[str, str] = {}
-    assert compiled_replay.choose_cache(source, env, False, home) and env == {}  # beside the code
-    assert source.is_dir() and compiled_replay._writable(source)
+    assert numba_cache.choose_cache(source, env, False, home) and env == {}  # beside the code
+    assert source.is_dir() and numba_cache.writable_folder(source)
     user = home / ".cache" / "cogmap" / "numba"
 
     def only(*folders: Path):  # a read-only install: only these folders can be written
         return lambda folder: folder in folders
 
-    assert compiled_replay.choose_cache(source, env, False, home, only(user))
+    assert numba_cache.choose_cache(source, env, False, home, only(user))
     assert env == {"NUMBA_CACHE_DIR": str(user)}
     env = {"XDG_CACHE_HOME": str(tmp_path / "xdg")}
     xdg = tmp_path / "xdg" / "cogmap" / "numba"
-    assert compiled_replay.choose_cache(source, env, False, home, only(xdg))
+    assert numba_cache.choose_cache(source, env, False, home, only(xdg))
     assert env["NUMBA_CACHE_DIR"] == str(xdg)
     env = {}
-    assert not compiled_replay.choose_cache(source, env, True, home, only(user))  # numba set up
-    assert not compiled_replay.choose_cache(source, env, False, home, only()) and env == {}
+    assert not numba_cache.choose_cache(source, env, True, home, only(user))  # numba set up
+    assert not numba_cache.choose_cache(source, env, False, home, only()) and env == {}
     env = {"NUMBA_CACHE_DIR": "/elsewhere"}
-    assert compiled_replay.choose_cache(source, env, False, home, only())  # the user's choice
+    assert numba_cache.choose_cache(source, env, False, home, only())  # the user's choice
     assert env == {"NUMBA_CACHE_DIR": "/elsewhere"}
 
 

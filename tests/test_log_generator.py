@@ -21,8 +21,9 @@ from cogmap_core.datasets.log_routes import PATTERNS
 from cogmap_core.datasets.log_writer import write_log
 from cogmap_core.errors import ParameterError
 from cogmap_core.evaluation import absolute_trajectory_error, dead_reckoning, interpolate_poses
+from cogmap_core.sources.log_reader import log_steps
 from cogmap_core.sources.odometry_csv import read_odometry_csv
-from cogmap_core.sources.odometry_log import OdometryLog, label_loop_candidates, log_steps
+from cogmap_core.sources.odometry_log import OdometryLog, label_loop_candidates
 from cogmap_core.sources.tuc import read_tuc
 
 SHORT = LogGeneratorConfig(duration=120.0)  # for the file tests: a tenth of a second's work

@@ -16,13 +16,9 @@ import pytest
 from cogmap_core.errors import InputFileError
 from cogmap_core.events import LinkToVertex
 from cogmap_core.sources.detect import detect_format, open_source
+from cogmap_core.sources.log_reader import LogReader, log_steps
 from cogmap_core.sources.odometry_csv import read_odometry_csv
-from cogmap_core.sources.odometry_log import (
-    LogFormatError,
-    LogReader,
-    LogSourceConfig,
-    log_steps,
-)
+from cogmap_core.sources.odometry_log import LogFormatError, LogSourceConfig
 from cogmap_core.sources.tuc import read_tuc
 from tests.test_odometry_log import LOOPS, events_of, odom_lines, write
 

@@ -12,13 +12,12 @@ import pytest
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
 from cogmap_core.sources.detect import LogOptions, detect_format, open_source
+from cogmap_core.sources.log_reader import LogReader, log_steps
 from cogmap_core.sources.odometry_csv import read_odometry_csv
 from cogmap_core.sources.odometry_log import (
     LogFormatError,
-    LogReader,
     LogSourceConfig,
     label_loop_candidates,
-    log_steps,
 )
 from cogmap_core.sources.tuc import looks_like_tuc, read_tuc
 

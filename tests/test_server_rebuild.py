@@ -23,10 +23,9 @@ from app.server.rebuild import (
     MapCache,
     ProcessBuilder,
     ThreadBuilder,
-    cluster_schedule,
-    same_schedule,
 )
-from cogmap_core.clustering import LoopClosureClusterer
+from app.server.schedule import same_schedule
+from cogmap_core.clustering import LoopClosureClusterer, cluster_schedule
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_log import EventLog

@@ -12,10 +12,10 @@ result -- every map is exactly what ``CognitiveMap(mode, params)`` fed the same 
   the browsers. A newer request abandons the builds in flight within one chunk of events.
 - :class:`MapCache`: maps built for parameters met before (a slider moved back, "reset to paper
   values") are kept and reused.
-- :func:`same_schedule`: the clustering thresholds ``T_interval`` and ``T_total`` act on a map only
-  through the schedule of loop-closure clusters (which links form a cluster, at which event it
-  closes and the map is optimised). When that schedule over the events so far is the same for
-  the old and the new values, the map is the same and is kept.
+- :func:`~app.server.schedule.same_schedule`: the clustering thresholds ``T_interval`` and
+  ``T_total`` act on a map only through the schedule of loop-closure clusters (which links form
+  a cluster, at which event it closes and the map is optimised). When that schedule over the
+  events so far is the same for the old and the new values, the map is the same and is kept.
 
 :class:`ThreadBuilder` does the same work on the calling thread (no worker processes).
 """
@@ -39,12 +39,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
+from app.server.schedule import SCHEDULE_PARAMS, schedule_divergence
 from cogmap_core import compiled_replay
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.event_file import KIND_LINK
 from cogmap_core.event_log import EventLog
 from cogmap_core.events import MapEvent
 
@@ -59,9 +58,6 @@ POLL_S = 0.005
 #: At most this many map states kept per build (:class:`Checkpoints`); past it, every other one
 #: is dropped (60 laps close some 240 clusters, each state a pickle of up to a few MB).
 MAX_CHECKPOINTS = 48
-
-#: The parameters of the loop-closure clustering (the cluster schedule).
-SCHEDULE_PARAMS = frozenset({"t_interval", "t_total"})
 
 Interrupted = Callable[[], bool]
 
@@ -231,114 +227,6 @@ def _resume(
             cmap.set_params(task.params)
             return cmap, start, usable
     return CognitiveMap(task.mode, task.params), 0, []
-
-
-# ---------------------------------------------------------------------------------- schedule
-def cluster_schedule(
-    times: NDArray[np.float64],
-    link_index: NDArray[np.int64],
-    end: int,
-    finish: bool,
-    t_interval: float,
-    t_total: float,
-) -> tuple[tuple[int, int, int], ...]:
-    """The loop-closure cluster schedule of ``events[:end]``, as a map's clusterer makes it.
-
-    ``times`` are the data times of all events, ``link_index`` the positions of the links among
-    them (ascending). Returns, per cluster, (its first link's event index, its last link's event
-    index, the index of the event at which it closes -- ``end`` when it closes at the end of the
-    data, -1 when it is still open). Two parameter sets with the same schedule build the same
-    map when they differ only in ``t_interval`` and ``t_total``
-    (:class:`~cogmap_core.clustering.LoopClosureClusterer` semantics, reproduced exactly).
-    """
-    links = link_index[link_index < end]
-    if links.size == 0:
-        return ()
-    t_links = times[links].tolist()
-    starts = [0]
-    start = last = t_links[0]
-    for i in range(1, len(t_links)):
-        t = t_links[i]
-        if t - last < t_interval and t - start <= t_total:
-            last = t
-        else:
-            starts.append(i)
-            start = last = t
-    bounds = starts + [len(t_links)]
-    index = links.tolist()
-    out: list[tuple[int, int, int]] = []
-    for c in range(len(starts)):
-        first, last_link = index[bounds[c]], index[bounds[c + 1] - 1]
-        t_start, t_last = float(times[first]), float(times[last_link])
-        close = min(
-            _first_past(times, last_link + 1, end, t_last, t_interval, inclusive=True),
-            _first_past(times, last_link + 1, end, t_start, t_total, inclusive=False),
-        )
-        if close >= end:
-            close = end if finish else -1
-        out.append((first, last_link, close))
-    return tuple(out)
-
-
-def _first_past(
-    times: NDArray[np.float64], lo: int, hi: int, since: float, limit: float, inclusive: bool
-) -> int:
-    """The first index in ``[lo, hi)`` with ``t - since >= limit`` (``>`` unless ``inclusive``).
-
-    Evaluated exactly as the clusterer does (a difference of two floats); times do not decrease,
-    so the predicate is monotonic and a binary search finds it. ``hi`` when there is none.
-    """
-    while lo < hi:
-        mid = (lo + hi) // 2
-        gap = float(times[mid]) - since
-        if gap >= limit if inclusive else gap > limit:
-            hi = mid
-        else:
-            lo = mid + 1
-    return lo
-
-
-def same_schedule(
-    log: EventLog,
-    frames: int,
-    finish: bool,
-    old: MapParams,
-    new: MapParams,
-) -> bool:
-    """Whether a map built with ``old`` is exactly the map built with ``new`` (module doc).
-
-    True only when the two differ in nothing but ``t_interval``/``t_total`` and those give the same
-    cluster schedule over the first ``frames`` frames.
-    """
-    changed = {k for k, v in old.to_dict().items() if getattr(new, k) != v}
-    if not changed or not changed <= SCHEDULE_PARAMS:
-        return not changed
-    end = int(log.frame_end[frames - 1]) if frames else 0
-    columns = log.columns(end)
-    times, links = columns["time"], np.flatnonzero(columns["kind"] == KIND_LINK)
-    return cluster_schedule(times, links, end, finish, old.t_interval, old.t_total) == (
-        cluster_schedule(times, links, end, finish, new.t_interval, new.t_total)
-    )
-
-
-def schedule_divergence(log: EventLog, end: int, old: MapParams, new: MapParams) -> int:
-    """How many of the first ``end`` events maps built with ``old`` and ``new`` apply alike.
-
-    For parameters that differ only in ``t_interval``/``t_total``: the clusters before the first
-    one whose (first link, last link, close) differs are the same, and that cluster starts at
-    the same link in both schedules; the maps are the same until the earlier of its two closes
-    (where one of them is optimised). ``end`` when the schedules agree throughout.
-    """
-    columns = log.columns(end)
-    times, links = columns["time"], np.flatnonzero(columns["kind"] == KIND_LINK)
-    a = cluster_schedule(times, links, end, False, old.t_interval, old.t_total)
-    b = cluster_schedule(times, links, end, False, new.t_interval, new.t_total)
-    for c in range(min(len(a), len(b))):
-        if a[c] != b[c]:
-            return min(end if a[c][2] < 0 else a[c][2], end if b[c][2] < 0 else b[c][2])
-    if len(a) != len(b):  # (cannot happen over the same links; be safe: its first link)
-        return (a if len(a) > len(b) else b)[min(len(a), len(b))][0]
-    return end
 
 
 # ---------------------------------------------------------------------------------- cache
@@ -750,10 +638,7 @@ __all__ = [
     "ThreadBuilder",
     "build_map",
     "build_map_resumed",
-    "cluster_schedule",
     "make_builder",
-    "same_schedule",
-    "schedule_divergence",
 ]
 
 

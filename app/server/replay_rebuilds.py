@@ -18,8 +18,9 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
-from app.server.rebuild import Abandoned, Builder, BuildTask, MapCache, same_schedule
+from app.server.rebuild import Abandoned, Builder, BuildTask, MapCache
 from app.server.replay_state import PlaybackState, RebuildRecord
+from app.server.schedule import same_schedule
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.slam import ALL_MODES, SlamSession

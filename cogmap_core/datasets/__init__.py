@@ -17,7 +17,8 @@ from cogmap_core.datasets.errors import (
 from cogmap_core.datasets.generator import GenerationResult, MazeConfig, generate_maze_bag
 from cogmap_core.datasets.layout import DEFAULT_LAYOUT, Layout, builtin_layouts, load_layout
 from cogmap_core.datasets.motion import OdometryModel
-from cogmap_core.datasets.rosbag_reader import BagInfo, BagReader, ReadCounters, open_bag
+from cogmap_core.datasets.read_counters import ReadCounters
+from cogmap_core.datasets.rosbag_reader import BagInfo, BagReader, open_bag
 from cogmap_core.datasets.topics import BagTopics
 
 __all__ = [

@@ -59,11 +59,10 @@ from __future__ import annotations
 import logging
 import math
 import shutil
-import struct
 import tempfile
 from collections import deque
 from collections.abc import Iterator
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -74,8 +73,17 @@ from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 
+from cogmap_core.datasets.bag_messages import (
+    ROS1_MAGIC,
+    check_ros1_header,
+    ground_truth_pose,
+    interpolate_pose,
+    stamp_ns,
+)
+from cogmap_core.datasets.clock_jumps import CLOCK_JUMP_POLICIES, ClockJump, plan_clock_jumps
 from cogmap_core.datasets.errors import BagError, BagMessageTypeError, BagTopicError
 from cogmap_core.datasets.jpeg import MAX_IMAGE_PIXELS, ImageTooLarge, JpegDecoder
+from cogmap_core.datasets.read_counters import DESCRIBED_AT_OPEN, ReadCounters
 from cogmap_core.datasets.topics import (
     GROUND_TRUTH_TYPES,
     IMAGE_TYPE,
@@ -110,14 +118,10 @@ _COLOUR_FLAGS = {
     4: cv2.IMREAD_REDUCED_COLOR_4,
     8: cv2.IMREAD_REDUCED_COLOR_8,
 }
-_ROS1_MAGIC = b"#ROSBAG V2.0\n"
 _GT_INTERPOLATION_GAP = 1.0  # s
 _GT_HOLD = 0.25  # s
 _CLOCK_RESET_AFTER = 3
 _START_MARGIN = 2.0  # s of data read before start_time (odometry clock, ground truth)
-#: A topic's record time going back by more than this (s) in write order is a clock jump.
-CLOCK_JUMP_TOLERANCE = 0.5
-CLOCK_JUMP_POLICIES = ("drop", "stop")
 CORRUPT_DATA_POLICIES = ("error", "stop")
 
 
@@ -156,219 +160,6 @@ class BagInfo:
     def frame_rate(self) -> float:
         """Mean camera rate (Hz)."""
         return self.frame_count / self.duration if self.duration > 0 else 0.0
-
-
-@dataclass
-class ReadCounters:
-    """Counts of one pass over a bag (see the module docstring for the policy)."""
-
-    frames: int = 0
-    undecodable_images: int = 0
-    image_size_changes: int = 0
-    image_stamps_backwards: int = 0
-    corrupt_messages: int = 0
-    nonfinite_odometry: int = 0
-    odometry_stamps_backwards: int = 0
-    odometry_clock_resets: int = 0
-    odometry_gaps: int = 0
-    nonfinite_ground_truth: int = 0
-    ground_truth_stamps_backwards: int = 0
-    frames_without_ground_truth: int = 0
-    corrupt_images: int = 0
-    clock_jumps: int = 0
-    clock_jump_messages_dropped: int = 0
-    corrupt_chunks: int = 0
-    oversized_images: int = 0
-    first_seen: dict[str, float] = field(default_factory=dict)
-
-    def note(self, name: str, time: float) -> None:
-        """Count one event of kind ``name`` at data time ``time`` (s)."""
-        setattr(self, name, getattr(self, name) + 1)
-        if name not in self.first_seen:
-            self.first_seen[name] = time
-            log.warning("%s (first at t=%.2f s)", _WARNING_TEXT[name], time)
-
-    def warnings(self) -> list[str]:
-        """One line per kind of problem met, with its count and first time."""
-        out = []
-        for f in fields(self):
-            if f.name in ("frames", "first_seen", *_DESCRIBED_AT_OPEN):
-                continue
-            n = getattr(self, f.name)
-            if n:
-                first = self.first_seen.get(f.name, float("nan"))
-                out.append(f"{n} x {_WARNING_TEXT[f.name]} (first at t={first:.2f} s)")
-        return out
-
-
-_WARNING_TEXT = {
-    "undecodable_images": "undecodable camera image skipped",
-    "image_size_changes": "camera image of a different size skipped",
-    "image_stamps_backwards": "camera frame stamped before the previous one skipped",
-    "corrupt_messages": "unreadable (corrupt) message skipped",
-    "nonfinite_odometry": "odometry with NaN/inf velocity skipped",
-    "odometry_stamps_backwards": "odometry stamped before the previous one skipped",
-    "odometry_clock_resets": "odometry clock reset accepted",
-    "odometry_gaps": "odometry gap longer than the limit (no motion integrated over it)",
-    "nonfinite_ground_truth": "ground-truth pose with NaN/inf skipped",
-    "ground_truth_stamps_backwards": "ground-truth pose stamped before the previous one skipped",
-    "frames_without_ground_truth": "frame without ground truth nearby",
-    "corrupt_images": "camera image with corrupt JPEG data (decoded scrambled) skipped",
-    "clock_jumps": "clock jump back (see the opening warning)",
-    "clock_jump_messages_dropped": "message dropped at a clock jump",
-    "corrupt_chunks": "corrupt bag data: reading stopped there, the frames before it kept",
-    "oversized_images": f"camera image larger than {MAX_IMAGE_PIXELS:,} pixels skipped undecoded",
-}
-
-
-#: Counted per pass but described by :attr:`BagReader.open_warnings` (found when opening).
-_DESCRIBED_AT_OPEN = ("clock_jumps", "clock_jump_messages_dropped")
-
-
-def _yaw(q: Any) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def _stamp_ns(msg: Any, record_ns: int) -> int:
-    header = getattr(msg, "header", None)
-    if header is None:
-        return record_ns
-    ns = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-    return ns if ns > 0 else record_ns
-
-
-def _ground_truth_pose(msg: Any, msgtype: str) -> tuple[float, float, float]:
-    if msgtype == "geometry_msgs/msg/Pose2D":
-        return float(msg.x), float(msg.y), float(msg.theta)
-    if msgtype == "geometry_msgs/msg/Pose":
-        pose = msg
-    elif msgtype == "geometry_msgs/msg/PoseStamped":
-        pose = msg.pose
-    else:  # PoseWithCovarianceStamped, Odometry
-        pose = msg.pose.pose
-    return float(pose.position.x), float(pose.position.y), _wrap(_yaw(pose.orientation))
-
-
-def _interpolate(
-    t: float, a: tuple[float, float, float, float], b: tuple[float, float, float, float]
-) -> tuple[float, float, float]:
-    ta, xa, ya, tha = a
-    tb, xb, yb, thb = b
-    alpha = 0.0 if tb <= ta else min(1.0, max(0.0, (t - ta) / (tb - ta)))
-    theta = _wrap(tha + alpha * _wrap(thb - tha))
-    return xa + alpha * (xb - xa), ya + alpha * (yb - ya), theta
-
-
-def _check_ros1_header(path: Path) -> None:
-    """Diagnose truncated / unindexed ROS1 bags precisely before rosbags reads them."""
-    size = path.stat().st_size
-    with path.open("rb") as fh:
-        head = fh.read(4096 + 13)
-    body = head[len(_ROS1_MAGIC) :]
-    if len(body) < 4:
-        raise BagError(f"{path} is truncated (only {size} bytes); copy or record it again")
-    (hlen,) = struct.unpack_from("<I", body, 0)
-    fields_: dict[bytes, bytes] = {}
-    pos = 4
-    end = min(4 + hlen, len(body))
-    while pos + 4 <= end:
-        (flen,) = struct.unpack_from("<I", body, pos)
-        item = body[pos + 4 : pos + 4 + flen]
-        pos += 4 + flen
-        name, _, value = item.partition(b"=")
-        fields_[name] = value
-    index_pos_raw = fields_.get(b"index_pos")
-    if index_pos_raw is None or len(index_pos_raw) != 8:
-        raise BagError(f"{path} has a damaged bag header; it is corrupt, copy it again")
-    (index_pos,) = struct.unpack("<Q", index_pos_raw)
-    if index_pos == 0:
-        raise BagError(
-            f"{path} has no index (the recording was not closed properly); reindex it with "
-            "'rosbag reindex' or record it again"
-        )
-    if index_pos >= size:
-        raise BagError(
-            f"{path} is truncated: its index starts at byte {index_pos} but the file has only "
-            f"{size} bytes; copy it again"
-        )
-
-
-@dataclass(frozen=True)
-class ClockJump:
-    """A jump back of the record clock.
-
-    Attributes:
-        time: data time (s) the clock had reached when it jumped.
-        back: how far it went back (s).
-        dropped: messages dropped because of it (the overlap, or everything after for "stop").
-
-    """
-
-    time: float
-    back: float
-    dropped: int
-
-
-def plan_clock_jumps(
-    connections: list[Connection], policy: str, t0_ns: int
-) -> list[ClockJump] | None:
-    """Drop the messages of ROS1 ``connections`` caught in record-clock jumps; None if none.
-
-    The bag's index lists each message's record time and position; in position (write) order a
-    topic's record time never goes back unless the recorder's clock did. After a jump of more
-    than :data:`CLOCK_JUMP_TOLERANCE`, policy ``"drop"`` removes that topic's messages until its
-    record time passes the time reached before the jump; ``"stop"`` removes everything after the
-    first jump. The removal is done on the reader's index, so dropped messages are never read.
-    Bags without such an index (ROS2) are left alone.
-    """
-    tol_ns = int(CLOCK_JUMP_TOLERANCE * 1e9)
-    per_topic: list[tuple[Connection, list[Any], list[Any]]] = []
-    jumps: list[tuple[int, int, int]] = []  # (high-water ns, back ns, dropped)
-    for conn in connections:
-        indexes = getattr(getattr(conn, "owner", None), "indexes", None)
-        entries = indexes.get(conn.id) if isinstance(indexes, dict) else None
-        if not isinstance(entries, list) or not all(
-            hasattr(e, "chunk_pos") and hasattr(e, "offset") for e in entries[:1]
-        ):
-            return None
-        in_write_order = sorted(entries, key=lambda e: (e.chunk_pos, e.offset))
-        kept: list[Any] = []
-        high: int | None = None
-        resume: int | None = None
-        stopped = False
-        for entry in in_write_order:
-            t = int(entry.time)
-            if stopped or (resume is not None and t < resume):
-                jumps[-1] = (jumps[-1][0], jumps[-1][1], jumps[-1][2] + 1)
-                continue
-            resume = None
-            if high is not None and t < high - tol_ns:
-                jumps.append((high, high - t, 1))
-                stopped = policy == "stop"
-                resume = high
-                continue
-            high = t if high is None else max(high, t)
-            kept.append(entry)
-        if len(kept) != len(entries):
-            per_topic.append((conn, indexes, sorted(kept, key=lambda e: int(e.time))))
-    if not jumps:
-        return None
-    for conn, indexes, kept in per_topic:
-        indexes[conn.id] = kept
-    # topics jump together: report one jump per distinct moment (within the tolerance)
-    jumps.sort()
-    merged: list[list[int]] = []
-    for high, back, dropped in jumps:
-        if merged and high - merged[-1][0] <= tol_ns:
-            merged[-1][1] = max(merged[-1][1], back)
-            merged[-1][2] += dropped
-        else:
-            merged.append([high, back, dropped])
-    return [ClockJump((h - t0_ns) / 1e9, b / 1e9, d) for h, b, d in merged]
 
 
 class BagReader:
@@ -445,13 +236,13 @@ class BagReader:
         else:
             try:
                 with path.open("rb") as fh:
-                    magic = fh.read(len(_ROS1_MAGIC))
+                    magic = fh.read(len(ROS1_MAGIC))
             except OSError as exc:
                 raise BagError(f"cannot read {path}: {exc.strerror}; check permissions") from None
             if not magic:
                 raise BagError(f"{path} is empty; record or generate the bag again")
-            if magic == _ROS1_MAGIC:
-                _check_ros1_header(path)
+            if magic == ROS1_MAGIC:
+                check_ros1_header(path)
                 if path.suffix == ".bag":
                     ros_paths = [path]
                 else:  # rosbags recognises ROS1 bags by their suffix
@@ -560,7 +351,7 @@ class BagReader:
                             msg = reader.deserialize(raw, c.msgtype)
                         except Exception:
                             break
-                        t0 = min(t0, _stamp_ns(msg, rec))
+                        t0 = min(t0, stamp_ns(msg, rec))
                         break
                 except Exception as exc:
                     raise self._corrupt(exc, None) from None
@@ -646,7 +437,7 @@ class BagReader:
         if self.clock_jumps:
             counters.clock_jumps = len(self.clock_jumps)
             counters.clock_jump_messages_dropped = sum(j.dropped for j in self.clock_jumps)
-            for name in _DESCRIBED_AT_OPEN:
+            for name in DESCRIBED_AT_OPEN:
                 counters.first_seen[name] = self.clock_jumps[0].time
         self.counters = counters
         topics = self.topics
@@ -717,7 +508,7 @@ class BagReader:
                 except Exception:
                     counters.note("corrupt_messages", (record_ns - t0) / 1e9)
                     continue
-                stamp = _stamp_ns(msg, record_ns)
+                stamp = stamp_ns(msg, record_ns)
                 now = (stamp - t0) / 1e9
 
                 if topic == odom_topic:
@@ -787,7 +578,7 @@ class BagReader:
                         pending.append(frame_data)
 
                 elif topic == gt_topic:
-                    x, y, th = _ground_truth_pose(msg, gt_type)
+                    x, y, th = ground_truth_pose(msg, gt_type)
                     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(th)):
                         counters.note("nonfinite_ground_truth", now)
                         continue
@@ -798,7 +589,7 @@ class BagReader:
                     while pending and pending[0][0] <= now:
                         fd = pending.popleft()
                         if gt_prev is not None and now - gt_prev[0] <= _GT_INTERPOLATION_GAP:
-                            pose = _interpolate(fd[0], gt_prev, current)
+                            pose = interpolate_pose(fd[0], gt_prev, current)
                         elif now - fd[0] <= _GT_HOLD:
                             pose = (x, y, th)
                         else:

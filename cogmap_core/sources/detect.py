@@ -31,14 +31,10 @@ from cogmap_core.datasets.video_reader import VIDEO_SUFFIXES, open_video
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.evaluation import EvaluationSettings
 from cogmap_core.frontend.config import FrontEndConfig
+from cogmap_core.sources.log_reader import LogReader
 from cogmap_core.sources.log_text import BOM
 from cogmap_core.sources.odometry_csv import looks_like_csv, read_odometry_csv
-from cogmap_core.sources.odometry_log import (
-    LOG_EVALUATION,
-    LOG_MAP_PARAMS,
-    LogReader,
-    LogSourceConfig,
-)
+from cogmap_core.sources.odometry_log import LOG_EVALUATION, LOG_MAP_PARAMS, LogSourceConfig
 from cogmap_core.sources.tuc import looks_like_tuc, read_tuc
 
 FORMATS = ("bag", "video", "images", "tuc", "csv")
