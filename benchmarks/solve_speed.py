@@ -53,14 +53,14 @@ def optimizer_at(revision: str) -> ModuleType:
         capture_output=True,
         text=True,
     ).stdout
-    folder = Path(tempfile.mkdtemp(prefix="cogmap-optimizer-"))
-    path = folder / "optimizer_baseline.py"
-    path.write_text(source)
-    spec = importlib.util.spec_from_file_location("optimizer_baseline", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
+    with tempfile.TemporaryDirectory(prefix="cogmap-optimizer-") as folder:
+        path = Path(folder) / "optimizer_baseline.py"
+        path.write_text(source)
+        spec = importlib.util.spec_from_file_location("optimizer_baseline", path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # dataclasses look their module up
+        spec.loader.exec_module(module)
     return module
 
 
