@@ -17,7 +17,7 @@ solve. Here the Python code runs *once per evaluation of the whole problem*, vec
    The indices are those of an order in which the edges join near vertices (reverse
    Cuthill-McKee): in the graph's own order every loop closure joins chunks laps apart, a
    residual block of its own (a standard map of the default dataset: 145 blocks instead of 349;
-   its rebuild's solves 1.15-1.2x faster, the same poses to 1e-13).
+   its rebuild's solves 1.1-1.2x faster, the same poses to 1e-13).
 2. A zero-valued *snapshot* residual block depends on every chunk and is evaluated first: it
    copies the current point and computes the residuals and Jacobians of *all* edges in one numpy
    pass. Each edge group then only copies its slice -- after checking that its parameter values are
