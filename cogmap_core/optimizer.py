@@ -14,6 +14,10 @@ solve. Here the Python code runs *once per evaluation of the whole problem*, vec
 1. Vertices are grouped into *chunks* of consecutive indices; each chunk is one Ceres parameter
    block (a view into one ``(N, 3)`` array). Edges are grouped by the pair of chunks they join;
    each group is one residual block. Far fewer blocks than edges, so far fewer Python calls.
+   The indices are those of an order in which the edges join near vertices (reverse
+   Cuthill-McKee): in the graph's own order every loop closure joins chunks laps apart, a
+   residual block of its own (a standard map of the default dataset: 145 blocks instead of 349;
+   its rebuild's solves 1.1-1.2x faster, the same poses to 1e-13).
 2. A zero-valued *snapshot* residual block depends on every chunk and is evaluated first: it
    copies the current point and computes the residuals and Jacobians of *all* edges in one numpy
    pass. Each edge group then only copies its slice -- after checking that its parameter values are
@@ -40,8 +44,8 @@ from typing import Literal
 import numpy as np
 import pyceres
 from numpy.typing import NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 
 from cogmap_core.errors import OptimizationError, ParameterError
 from cogmap_core.geometry import wrap_angle
@@ -239,14 +243,16 @@ def edge_terms(
     res = np.einsum("kab,kb->ka", w, err)
     jac = None
     if with_jacobians:
-        d = np.zeros((theta.shape[0], 2, 3, 3))
-        d[:, 0, 0, 0], d[:, 0, 0, 1], d[:, 0, 0, 2] = -c, -s, v
-        d[:, 0, 1, 0], d[:, 0, 1, 1], d[:, 0, 1, 2] = s, -c, -u
-        d[:, 0, 2, 2] = -1.0
-        d[:, 1, 0, 0], d[:, 1, 0, 1] = c, s
-        d[:, 1, 1, 0], d[:, 1, 1, 1] = -s, c
-        d[:, 1, 2, 2] = 1.0
-        jac = np.matmul(w[:, None], d)
+        # W times d err / d pose_j = [[c, s, 0], [-s, c, 0], [0, 0, 1]] and d err / d pose_i =
+        # [[-c, -s, v], [s, -c, -u], [0, 0, -1]], written out (a batched 3x3 matmul is slower)
+        w0, w1, w2 = w[:, :, 0], w[:, :, 1], w[:, :, 2]
+        c1, s1 = c[:, None], s[:, None]
+        jac = np.empty((theta.shape[0], 2, 3, 3))
+        jac[:, 1, :, 0] = w0 * c1 - w1 * s1
+        jac[:, 1, :, 1] = w0 * s1 + w1 * c1
+        jac[:, 1, :, 2] = w2
+        jac[:, 0, :, :2] = -jac[:, 1, :, :2]
+        jac[:, 0, :, 2] = w0 * v[:, None] - w1 * u[:, None] - w2
     for rows, kernel in losses or ():
         res, jac = apply_kernel(res, jac, kernel, rows)
     return res, jac
@@ -391,7 +397,7 @@ class _Snapshot:
         self.model = model
         self.losses = losses  # edges in the snapshot's (sorted) order
         self.chunk_bytes: list[bytes | None] = [None] * num_chunks
-        self.residuals = np.zeros(0)
+        self.residuals = np.zeros(3 * edge_from.shape[0])
         self.dense = np.zeros(plan.dense_size)
         keep = plan.target >= 0
         self.dense_target = plan.target[keep]
@@ -405,7 +411,7 @@ class _Snapshot:
         res, jac = edge_terms(
             x[self.edge_from], x[self.edge_to], self.model, self.losses, with_jacobians
         )
-        self.residuals = res.reshape(-1)
+        self.residuals[:] = res.reshape(-1)
         if jac is not None:
             flat = jac.reshape(-1)
             self.dense[self.dense_target] = (
@@ -451,25 +457,27 @@ class _EdgeGroupCost(pyceres.CostFunction):
         self.chunks = plan.group_chunks[group]
         self.spans = plan.spans[group]
         self.r0, self.r1 = 3 * first, 3 * end
+        self.res_view = snapshot.residuals[self.r0 : self.r1]
+        self.jac_views = [snapshot.dense[a:b] for a, b in self.spans]
+        self.two = len(self.chunks) == 2
 
     def Evaluate(  # noqa: N802 (Ceres' name)
         self, parameters: list[FloatArray], residuals: FloatArray, jacobians: list | None
     ) -> bool:
         snap = self.snapshot
-        fresh = jacobians is None or snap.has_jacobians
-        if fresh:
-            stored = snap.chunk_bytes
-            for chunk, values in zip(self.chunks, parameters, strict=True):
-                if stored[chunk] != values.tobytes():
-                    fresh = False
-                    break
-        if fresh:
-            residuals[:] = snap.residuals[self.r0 : self.r1]
+        stored = snap.chunk_bytes
+        chunks = self.chunks
+        if (
+            (jacobians is None or snap.has_jacobians)
+            and stored[chunks[0]] == parameters[0].tobytes()
+            and (not self.two or stored[chunks[1]] == parameters[1].tobytes())
+        ):
+            residuals[:] = self.res_view
             if jacobians is not None:
-                dense = snap.dense
-                for block, (a, b) in zip(jacobians, self.spans, strict=True):
-                    if block is not None:
-                        block[:] = dense[a:b]
+                views = self.jac_views
+                jacobians[0][:] = views[0]
+                if self.two:
+                    jacobians[1][:] = views[1]
             return True
         # Ceres evaluated this block at another point than the snapshot: compute it on its own.
         plan = self.plan
@@ -496,13 +504,55 @@ class _EdgeGroupCost(pyceres.CostFunction):
         return True
 
 
-def _gauge_fixed(graph: PoseGraph) -> NDArray[np.bool_]:
+class _EdgeResiduals:
+    """The whitened residuals (no kernel) of a graph's edges, in its edge order."""
+
+    def __init__(self, graph: PoseGraph) -> None:
+        self.edge_from, self.edge_to = graph.edge_from, graph.edge_to
+        self.model = EdgeModel(graph.measurements, graph.information)
+
+    def at(self, poses: FloatArray) -> FloatArray:
+        """``(E, 3)`` residuals at ``poses`` (graph order)."""
+        res, _ = edge_terms(poses[self.edge_from], poses[self.edge_to], self.model, None, False)
+        return res
+
+
+def _chi2_of(res: FloatArray) -> FloatArray:
+    """``(E,)`` squared norms of residuals (as :func:`chi2`)."""
+    return np.einsum("ka,ka->k", res, res)
+
+
+def _cost_of(res: FloatArray, losses: EdgeLosses) -> float:
+    """The cost ``1/2 sum rho(|r|^2)`` of residuals without kernel (as :func:`graph_cost`)."""
+    for rows, kernel in losses:
+        res, _ = apply_kernel(res, None, kernel, rows)
+    return 0.5 * float(np.einsum("ka,ka->", res, res))
+
+
+def _adjacency(graph: PoseGraph) -> csr_matrix:
+    """The vertices' symmetric adjacency matrix (an edge's weight: how many edges join them)."""
+    n = graph.num_vertices
+    one_way = coo_matrix(
+        (np.ones(graph.num_edges), (graph.edge_from, graph.edge_to)), shape=(n, n)
+    ).tocsr()
+    return (one_way + one_way.T).tocsr()
+
+
+def _vertex_order(adjacency: csr_matrix) -> IntArray:
+    """An order of the vertices in which the edges join near vertices (reverse Cuthill-McKee).
+
+    In index order a loop closure joins vertices laps apart, so each one is an edge between
+    two chunks of its own -- a residual block, hence a Python call per evaluation. In this
+    order the bandwidth of the graph is small (26 vertices on the default dataset's standard
+    map of 2287 vertices, against 2084), and nearly every edge joins a chunk to itself or to
+    the next one: 145 residual blocks instead of 349 there.
+    """
+    return reverse_cuthill_mckee(adjacency, symmetric_mode=True).astype(np.int64)
+
+
+def _gauge_fixed(graph: PoseGraph, adjacency: csr_matrix) -> NDArray[np.bool_]:
     """Fixed vertices: the graph's own, plus the first vertex of every component without one."""
     fixed = graph.fixed.copy()
-    n = graph.num_vertices
-    adjacency = coo_matrix(
-        (np.ones(graph.num_edges), (graph.edge_from, graph.edge_to)), shape=(n, n)
-    )
     count, labels = connected_components(adjacency, directed=False)
     has_fixed = np.zeros(count, dtype=bool)
     has_fixed[labels[fixed]] = True
@@ -580,7 +630,8 @@ def optimize_pose_graph(
     if not (np.isfinite(graph.poses).all() and np.isfinite(graph.measurements).all()):
         raise OptimizationError("the pose graph has NaN or infinite poses or measurements")
     n, e = graph.num_vertices, graph.num_edges
-    fixed = _gauge_fixed(graph) if n else graph.fixed
+    adjacency = _adjacency(graph)
+    fixed = _gauge_fixed(graph, adjacency) if n else graph.fixed
     final_losses = _final_losses(graph, options)
     if e == 0 or fixed.all() or options.max_iterations == 0:
         initial_cost = graph_cost(graph, losses=final_losses)
@@ -615,18 +666,25 @@ def optimize_pose_graph(
                 "the LAGO initialisation overflowed: the graph's values are too large; rescale "
                 "the graph, or start from its own poses (initialization 'none')"
             )
-        poses = np.ascontiguousarray(start, dtype=np.float64)
     else:
-        poses = np.array(graph.poses, dtype=np.float64, order="C")  # a copy Ceres works in
+        start = graph.poses
 
-    bounds = _chunk_bounds(n, fixed, options.chunk_size)
+    # Ceres works in ``poses``: the vertices in the order ``perm`` (vertex ``perm[k]`` at row
+    # ``k``), so that the chunks hold vertices that the edges join; ``poses[inverse]`` is the
+    # estimate in the graph's order.
+    perm = _vertex_order(adjacency)
+    inverse = np.empty(n, dtype=np.int64)
+    inverse[perm] = np.arange(n)
+    poses = np.ascontiguousarray(start[perm], dtype=np.float64)
+    bounds = _chunk_bounds(n, fixed[perm], options.chunk_size)
     chunk_start = np.array([a for a, _ in bounds], dtype=np.int64)
     chunk_len = np.array([b - a for a, b in bounds], dtype=np.int64)
     chunk_of = np.repeat(np.arange(len(bounds), dtype=np.int64), chunk_len)
-    ci, cj = chunk_of[graph.edge_from], chunk_of[graph.edge_to]
+    local_from, local_to = inverse[graph.edge_from], inverse[graph.edge_to]
+    ci, cj = chunk_of[local_from], chunk_of[local_to]
     lo, hi = np.minimum(ci, cj), np.maximum(ci, cj)
     order = np.argsort(lo * len(bounds) + hi, kind="stable")
-    edge_from, edge_to = graph.edge_from[order], graph.edge_to[order]
+    edge_from, edge_to = local_from[order], local_to[order]
     model = EdgeModel(graph.measurements[order], graph.information[order])
     blocks = [poses[a:b].reshape(-1) for a, b in bounds]
     sizes = [3 * (b - a) for a, b in bounds]
@@ -648,7 +706,7 @@ def optimize_pose_graph(
             [blocks[c] for c in chunks],
         )
     for c, (a, b) in enumerate(bounds):
-        if b - a == 1 and fixed[a]:
+        if b - a == 1 and fixed[perm[a]]:
             problem.set_parameter_block_constant(blocks[c])
 
     solver_options = pyceres.SolverOptions()
@@ -660,6 +718,7 @@ def optimize_pose_graph(
     solver_options.initial_trust_region_radius = 1e8
     solver_options.logging_type = pyceres.LoggingType.SILENT
     loops = graph.loop_closures()
+    edge_residuals = _EdgeResiduals(graph)
     rest = list(final_losses[1:])  # the Huber loss of the other edges, if any
 
     def solve(reweighting: Reweighting | None) -> tuple[int, str, float, float]:
@@ -674,8 +733,8 @@ def optimize_pose_graph(
         count = 0
         solver_options.max_num_iterations = min(IRLS_ITERATIONS, options.max_iterations)
         while True:  # one round of IRLS: the loop closures' weights, fixed
-            cost = graph_cost(graph, poses, losses=final_losses)
-            weights = reweighting.next(chi2(graph, poses), cost)
+            res = edge_residuals.at(poses[inverse])
+            weights = reweighting.next(_chi2_of(res), _cost_of(res, final_losses))
             if weights is None:
                 break
             snapshot.losses = sorted_losses([(loops, Weights(weights)), *rest])
@@ -705,10 +764,12 @@ def optimize_pose_graph(
         reweighting = Reweighting(options.loop_model, loops)
         iterations, termination, _, _ = solve(reweighting)
         reweightings = reweighting.rounds
-        final_cost = graph_cost(graph, poses, losses=final_losses)
+        res = edge_residuals.at(poses[inverse])
+        final_cost = _cost_of(res, final_losses)
         doubted = None
         if new_loops is not None:
-            doubted = loops & new_loops & _rejected(graph, poses, options)
+            rejected = loops & options.loop_model.final_kernel.rejects(_chi2_of(res))
+            doubted = loops & new_loops & rejected
         if doubted is not None and doubted.any():
             # The other hypothesis: the new links it rejected are true and the start is only
             # drifted. From the same start, those links are solved under the convex Huber
@@ -717,7 +778,8 @@ def optimize_pose_graph(
             kept = poses.copy()
             poses[:] = start
             kernel = options.loop_model.final_kernel
-            weights = drop_small(np.where(loops, kernel.weight(chi2(graph, start)), 1.0))
+            at_start = _chi2_of(edge_residuals.at(start[inverse]))
+            weights = drop_small(np.where(loops, kernel.weight(at_start), 1.0))
             convex_losses: EdgeLosses = [
                 (doubted, Kernel("huber", kernel.scale)),
                 (loops & ~doubted, Weights(weights)),
@@ -731,14 +793,15 @@ def optimize_pose_graph(
             more, other_termination, _, _ = solve(hypothesis)
             iterations += convex + more
             reweightings += hypothesis.rounds
-            other_cost = graph_cost(graph, poses, losses=final_losses)
+            other_cost = _cost_of(edge_residuals.at(poses[inverse]), final_losses)
             if other_cost < final_cost:
                 final_cost, termination = other_cost, other_termination
             else:
                 poses[:] = kept
+    poses = poses[inverse]
     poses[:, 2] = wrap_angle(poses[:, 2])
     if math.isnan(initial_cost):
-        initial_cost = graph_cost(graph, losses=final_losses)
+        initial_cost = _cost_of(edge_residuals.at(graph.poses), final_losses)
     return OptimizationResult(
         poses=poses,
         initial_cost=initial_cost,

@@ -9,6 +9,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from app.cli import main
+from cogmap_core import optimizer
 from cogmap_core.errors import OptimizationError, ParameterError
 from cogmap_core.g2o import read_g2o
 from cogmap_core.geometry import compose, polar_to_relative, wrap_angle
@@ -21,6 +22,7 @@ from cogmap_core.optimizer import (
     optimize_pose_graph,
 )
 from cogmap_core.posegraph import PoseGraph
+from cogmap_core.robust import LoopClosureModel
 
 
 def random_graph(
@@ -162,6 +164,120 @@ def test_result_independent_of_chunking_and_angles_wrapped():
         assert r.final_cost == pytest.approx(results[0].final_cost, rel=1e-9)
     for r in results:
         assert (r.poses[:, 2] >= -np.pi).all() and (r.poses[:, 2] < np.pi).all()
+
+
+def laps_graph(laps: int, per_lap: int) -> PoseGraph:
+    """``laps`` laps of a closed ``per_lap``-gon, each vertex closed to the same corner a lap on.
+
+    The start is the odometry chain with a heading bias (so the loop closures are needed), and
+    every third loop closure is false.
+    """
+    n = laps * per_lap
+    angle = 2 * np.pi / per_lap
+    side = 2 * np.sin(angle / 2)
+    step = np.array([side, 0.0, angle])
+    frm = list(range(n - 1))
+    to = list(range(1, n))
+    meas = [step] * (n - 1)
+    for k in range(n - per_lap):
+        frm.append(k)
+        to.append(k + per_lap)
+        meas.append(np.array([0.0, 0.0, 0.0]) if k % 3 else np.array([0.7, -0.4, 0.5]))
+    start = np.zeros((n, 3))
+    for k in range(1, n):
+        start[k] = compose(start[k - 1], step + [0.0, 0.0, 0.01])
+    e = len(frm)
+    loops = np.arange(e) >= n - 1
+    info = np.repeat(np.diag([100.0, 100.0, 400.0])[None], e, axis=0)
+    info[loops] = np.diag([4.0, 4.0, 4.0])
+    return PoseGraph(np.arange(n), start, frm, to, np.array(meas), info, loop_closure=loops)
+
+
+def bandwidth(graph: PoseGraph, order: np.ndarray) -> int:
+    """The largest distance in ``order`` between two vertices an edge joins."""
+    position = np.empty(graph.num_vertices, dtype=np.int64)
+    position[order] = np.arange(graph.num_vertices)
+    return int(np.abs(position[graph.edge_from] - position[graph.edge_to]).max())
+
+
+@pytest.mark.parametrize("laps", [2, 3, 5])
+def test_vertex_order_puts_the_laps_side_by_side(laps):
+    """Loop closures join vertices a lap apart; in Ceres' order they are near neighbours."""
+    graph = laps_graph(laps, 40)
+    order = optimizer._vertex_order(optimizer._adjacency(graph))
+    assert sorted(order.tolist()) == list(range(graph.num_vertices))
+    assert bandwidth(graph, np.arange(graph.num_vertices)) == 40  # index order: a lap apart
+    # each breadth-first level of the ladder holds at most two vertices of each lap
+    assert bandwidth(graph, order) <= 2 * laps + 1
+
+
+def test_result_independent_of_the_vertex_order(monkeypatch):
+    """Ceres works in its own vertex order; the result is the one of the graph's own order.
+
+    With the robust loop model: its reweighting, and the hypothesis that rejected new links are
+    true (every third link here is false).
+    """
+    graph = laps_graph(3, 40)
+    options = OptimizerOptions(loop_model=LoopClosureModel(scale=0.09), huber_scale=1.0)
+    reordered = optimize_pose_graph(graph, options, new_loops=graph.loop_closures())
+    monkeypatch.setattr(optimizer, "_vertex_order", lambda a: np.arange(a.shape[0]))
+    plain = optimize_pose_graph(graph, options, new_loops=graph.loop_closures())
+    assert bandwidth(graph, np.arange(graph.num_vertices)) == 40
+    assert reordered.num_rejected == plain.num_rejected > 0
+    np.testing.assert_array_equal(reordered.rejected, plain.rejected)
+    assert (reordered.iterations, reordered.reweightings) == (plain.iterations, plain.reweightings)
+    np.testing.assert_allclose(reordered.poses, plain.poses, rtol=0, atol=1e-9)
+    assert reordered.final_cost == pytest.approx(plain.final_cost, rel=1e-9)
+    assert reordered.initial_cost == plain.initial_cost
+    np.testing.assert_array_equal(reordered.poses[0], graph.poses[0])  # the gauge: vertex 0
+
+
+def test_an_edge_group_away_from_the_snapshot_computes_its_own_edges(monkeypatch):
+    """A residual block copies the snapshot only when Ceres evaluates it at the snapshot's point.
+
+    Evaluated elsewhere (at a point the snapshot did not take, or for Jacobians the snapshot
+    does not hold) it computes its own edges: the same values as from a snapshot taken there.
+    """
+    groups: list[optimizer._EdgeGroupCost] = []
+    real_init = optimizer._EdgeGroupCost.__init__
+
+    def keep(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        groups.append(self)
+
+    monkeypatch.setattr(optimizer._EdgeGroupCost, "__init__", keep)
+    graph = laps_graph(2, 12)
+    optimize_pose_graph(graph, OptimizerOptions(chunk_size=4, huber_scale=0.5))
+    snapshot = groups[0].snapshot
+    rng = np.random.default_rng(1)
+    point = snapshot.poses + rng.normal(0, 0.3, snapshot.poses.shape)
+    chunks = [point[a:b].reshape(-1) for a, b in chunk_spans(snapshot, groups)]
+    two = [g for g in groups if len(g.chunks) == 2]
+    assert two and len(two) < len(groups)
+    for with_jacobians in (False, True):
+        snapshot.take([c.copy() for c in chunks], with_jacobians)
+        for group in groups:
+            values = [chunks[c] for c in group.chunks]
+            fresh, fresh_jac = group.evaluate(*values)
+            snapshot.chunk_bytes = [None] * len(chunks)  # the snapshot is elsewhere now
+            own, own_jac = group.evaluate(*values)
+            np.testing.assert_allclose(own, fresh, rtol=0, atol=1e-12)
+            for a, b in zip(own_jac, fresh_jac, strict=True):
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+            snapshot.take([c.copy() for c in chunks], with_jacobians)
+        # the snapshot's residuals are the edges' own (sorted as the groups hold them)
+        assert not np.array_equal(snapshot.residuals, 0)
+
+
+def chunk_spans(snapshot: optimizer._Snapshot, groups: list) -> list[tuple[int, int]]:
+    """The chunks' row ranges in the snapshot's poses, from the groups' Jacobian layout."""
+    count = len(snapshot.chunk_bytes)
+    sizes = [0] * count
+    for group in groups:
+        for chunk, (a, b) in zip(group.chunks, group.spans, strict=True):
+            sizes[chunk] = (b - a) // group.num_residuals() // 3
+    ends = np.cumsum(sizes)
+    return [(int(e - s), int(e)) for s, e in zip(sizes, ends, strict=True)]
 
 
 def test_huber_limits_the_damage_of_an_outlier():
