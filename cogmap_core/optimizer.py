@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 import signal
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -47,6 +46,16 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 
+from cogmap_core.ceres_blocks import EdgeGroupCost, Snapshot, SnapshotCost, plan_groups
+from cogmap_core.edge_residuals import (
+    EdgeLosses,
+    EdgeModel,
+    chi2,
+    edge_losses,
+    edge_terms,
+    graph_cost,
+    subset_loss,
+)
 from cogmap_core.errors import OptimizationError, ParameterError
 from cogmap_core.geometry import wrap_angle
 from cogmap_core.initialization import lago_initialization
@@ -165,345 +174,6 @@ class OptimizationResult:
         return 0 if self.rejected is None else int(np.count_nonzero(self.rejected))
 
 
-# --------------------------------------------------------------------------------------------
-# Vectorised residuals and Jacobians
-# --------------------------------------------------------------------------------------------
-
-
-class EdgeModel:
-    """Per-edge constants: the measurement and the whitening ``W = S blockdiag(R_z^T, 1)``."""
-
-    def __init__(self, measurements: FloatArray, information: FloatArray) -> None:
-        """Precompute whitening from measurements ``(E, 3)`` and information ``(E, 3, 3)``."""
-        cz, sz = np.cos(measurements[:, 2]), np.sin(measurements[:, 2])
-        rz_t = np.zeros_like(information)
-        rz_t[:, 0, 0], rz_t[:, 0, 1], rz_t[:, 1, 0], rz_t[:, 1, 1] = cz, sz, -sz, cz
-        rz_t[:, 2, 2] = 1.0
-        off_diagonal = information[:, [0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]]
-        scale = information[:, [0, 1, 2], [0, 1, 2]]
-        if not off_diagonal.any() and (scale > 0).all() and np.isfinite(scale).all():
-            # Diagonal information (the map's noise model; the paper's identity): the Cholesky
-            # factor is the square root of the diagonal (sqrt(1) * x == x exactly), and this
-            # product is exactly the general one below.
-            self.whitening = np.sqrt(scale)[:, :, None] * rz_t
-        else:
-            try:
-                lower = np.linalg.cholesky(information)  # Omega = L L^T, so S = L^T
-            except np.linalg.LinAlgError:
-                raise OptimizationError(
-                    "an edge information matrix is not positive definite; fix the edge weights"
-                ) from None
-            self.whitening = lower.transpose(0, 2, 1) @ rz_t
-        self.tx = measurements[:, 0].copy()
-        self.ty = measurements[:, 1].copy()
-        self.ttheta = measurements[:, 2].copy()
-
-    def subset(self, index: IntArray | slice) -> EdgeModel:
-        """The model of some of the edges."""
-        out = EdgeModel.__new__(EdgeModel)
-        out.whitening = self.whitening[index]
-        out.tx, out.ty, out.ttheta = self.tx[index], self.ty[index], self.ttheta[index]
-        return out
-
-
-EdgeLosses = Sequence[tuple[NDArray[np.bool_] | None, Kernel | Weights]]
-"""Robust kernels and the edges (a mask; None: all) each applies to; the masks are disjoint."""
-
-
-def edge_losses(huber_scale: float | None) -> EdgeLosses:
-    """The paper's loss: Huber on every edge (none for plain least squares)."""
-    return () if huber_scale is None else ((None, Kernel("huber", huber_scale)),)
-
-
-def edge_terms(
-    pose_i: FloatArray,
-    pose_j: FloatArray,
-    model: EdgeModel,
-    losses: EdgeLosses | None,
-    with_jacobians: bool,
-) -> tuple[FloatArray, FloatArray | None]:
-    """Whitened (and robustified) residuals ``(E, 3)`` and Jacobians ``(E, 2, 3, 3)``.
-
-    ``jac[:, 0]`` is d r / d pose_i and ``jac[:, 1]`` is d r / d pose_j. ``losses`` is None
-    (plain least squares) or kernels per edge
-    (:func:`~cogmap_core.robust.apply_kernel`): a robust residual is ``sqrt(rho(s)/s) r`` so
-    that its squared norm is ``rho(s)``.
-    """
-    theta = pose_i[:, 2]
-    c, s = np.cos(theta), np.sin(theta)
-    dx = pose_j[:, 0] - pose_i[:, 0]
-    dy = pose_j[:, 1] - pose_i[:, 1]
-    u = c * dx + s * dy
-    v = c * dy - s * dx
-    err = np.empty((theta.shape[0], 3))
-    err[:, 0] = u - model.tx
-    err[:, 1] = v - model.ty
-    err[:, 2] = wrap_angle(pose_j[:, 2] - theta - model.ttheta)
-    w = model.whitening
-    res = np.einsum("kab,kb->ka", w, err)
-    jac = None
-    if with_jacobians:
-        # W times d err / d pose_j = [[c, s, 0], [-s, c, 0], [0, 0, 1]] and d err / d pose_i =
-        # [[-c, -s, v], [s, -c, -u], [0, 0, -1]], written out (a batched 3x3 matmul is slower)
-        w0, w1, w2 = w[:, :, 0], w[:, :, 1], w[:, :, 2]
-        c1, s1 = c[:, None], s[:, None]
-        jac = np.empty((theta.shape[0], 2, 3, 3))
-        jac[:, 1, :, 0] = w0 * c1 - w1 * s1
-        jac[:, 1, :, 1] = w0 * s1 + w1 * c1
-        jac[:, 1, :, 2] = w2
-        jac[:, 0, :, :2] = -jac[:, 1, :, :2]
-        jac[:, 0, :, 2] = w0 * v[:, None] - w1 * u[:, None] - w2
-    for rows, kernel in losses or ():
-        res, jac = apply_kernel(res, jac, kernel, rows)
-    return res, jac
-
-
-def graph_cost(
-    graph: PoseGraph,
-    poses: FloatArray | None = None,
-    losses: EdgeLosses | None = None,
-) -> float:
-    """g2o cost ``1/2 sum rho(|S r|^2)`` of ``graph`` at ``poses`` (default: its own poses).
-
-    ``rho`` is the kernels of ``losses`` (:func:`edge_losses`), the identity without them.
-    """
-    if graph.num_edges == 0:
-        return 0.0
-    x = graph.poses if poses is None else poses
-    model = EdgeModel(graph.measurements, graph.information)
-    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, losses, False)
-    return 0.5 * float(np.einsum("ka,ka->", res, res))
-
-
-def chi2(graph: PoseGraph, poses: FloatArray | None = None) -> FloatArray:
-    """``(E,)`` squared whitened residual of every edge (no kernel) at ``poses``."""
-    x = graph.poses if poses is None else poses
-    model = EdgeModel(graph.measurements, graph.information)
-    res, _ = edge_terms(x[graph.edge_from], x[graph.edge_to], model, None, False)
-    return np.einsum("ka,ka->k", res, res)
-
-
-# --------------------------------------------------------------------------------------------
-# Ceres problem: chunked parameter blocks, grouped edges, one vectorised snapshot per evaluation
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class _Plan:
-    """How the edges are split into residual blocks and where their Jacobians go.
-
-    Edges are sorted by the pair of chunks they join; each run of one pair is a *group* (one
-    residual block). ``dense`` (owned by :class:`_Snapshot`) holds every group's Jacobian blocks
-    as Ceres lays them out -- per group and parameter block, row-major ``(3 edges, 3 n_block)``
-    -- one after the other; ``target[e, end, a, b]`` is where the derivative of residual ``a`` of
-    edge ``e`` with respect to component ``b`` of its ``end`` (0 from, 1 to) goes. Positions that
-    are not targets are structural zeros and stay zero.
-
-    Attributes:
-        group_start: ``(G + 1,)`` first edge of each group (and the number of edges).
-        group_chunks: the chunks (parameter blocks) of each group, one or two.
-        spans: per group and parameter block, the ``(start, end)`` of its block in ``dense``.
-        target: ``(E * 18,)`` flat targets in ``dense`` (-1: none, the edge is a self-loop).
-        local_from, local_to: per edge, its vertices' indices in the concatenation of its
-            group's chunks (for a group evaluated away from the snapshot).
-        dense_size: length of ``dense``.
-
-    """
-
-    group_start: IntArray
-    group_chunks: list[list[int]]
-    spans: list[list[tuple[int, int]]]
-    target: IntArray
-    local_from: IntArray
-    local_to: IntArray
-    dense_size: int
-
-
-def _plan_groups(
-    edge_from: IntArray,
-    edge_to: IntArray,
-    chunk_of: IntArray,
-    chunk_start: IntArray,
-    chunk_len: IntArray,
-) -> _Plan:
-    """Split edges (already sorted by chunk pair) into groups and plan their Jacobian layout."""
-    e = edge_from.shape[0]
-    ends = np.stack([edge_from, edge_to], axis=1)  # (E, 2)
-    chunk = chunk_of[ends]
-    lo = chunk.min(axis=1)
-    hi = chunk.max(axis=1)
-    key = lo * (int(chunk_of.max()) + 1) + hi
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    g = starts.size
-    counts = np.diff(np.r_[starts, e])
-    group_of = np.repeat(np.arange(g), counts)
-    q = np.arange(e) - starts[group_of]  # edge index within its group
-    rows = 3 * counts
-    g_lo, g_hi = lo[starts], hi[starts]
-    two = g_lo != g_hi
-    size0 = rows * 3 * chunk_len[g_lo]
-    size1 = np.where(two, rows * 3 * chunk_len[g_hi], 0)
-    off0 = np.cumsum(np.r_[0, (size0 + size1)[:-1]]) if g else np.zeros(0, dtype=np.int64)
-    off1 = off0 + size0
-    block = (chunk != lo[:, None]).astype(np.int64)  # 0: the group's first chunk, 1: its second
-    within = ends - chunk_start[chunk]  # vertex index inside its chunk
-    cols = 3 * chunk_len[chunk]  # (E, 2) columns of the parameter block of each end
-    offset = np.where(block == 0, off0[group_of][:, None], off1[group_of][:, None])
-    base = offset + 3 * q[:, None] * cols + 3 * within  # (E, 2)
-    a = np.arange(3)[None, None, :, None]
-    b = np.arange(3)[None, None, None, :]
-    target = base[:, :, None, None] + a * cols[:, :, None, None] + b
-    target[edge_from == edge_to] = -1  # a self-loop's two derivatives cancel: no entry
-    local = within + block * chunk_len[lo][:, None]
-    lo_list, hi_list, two_list = g_lo.tolist(), g_hi.tolist(), two.tolist()
-    o0, o1 = off0.tolist(), off1.tolist()
-    s0, s1 = size0.tolist(), size1.tolist()
-    group_chunks: list[list[int]] = []
-    spans: list[list[tuple[int, int]]] = []
-    for k in range(g):
-        if two_list[k]:
-            group_chunks.append([lo_list[k], hi_list[k]])
-            spans.append([(o0[k], o0[k] + s0[k]), (o1[k], o1[k] + s1[k])])
-        else:
-            group_chunks.append([lo_list[k]])
-            spans.append([(o0[k], o0[k] + s0[k])])
-    return _Plan(
-        group_start=np.r_[starts, e].astype(np.int64),
-        group_chunks=group_chunks,
-        spans=spans,
-        target=target.reshape(-1),
-        local_from=local[:, 0].copy(),
-        local_to=local[:, 1].copy(),
-        dense_size=int(off1[-1] + s1[-1]) if g else 0,
-    )
-
-
-class _Snapshot:
-    """All edge residuals and Jacobians at the point Ceres is currently evaluating."""
-
-    def __init__(
-        self,
-        poses: FloatArray,
-        edge_from: IntArray,
-        edge_to: IntArray,
-        model: EdgeModel,
-        losses: EdgeLosses,
-        plan: _Plan,
-        num_chunks: int,
-    ) -> None:
-        self.poses = poses.copy()
-        self.edge_from = edge_from
-        self.edge_to = edge_to
-        self.model = model
-        self.losses = losses  # edges in the snapshot's (sorted) order
-        self.chunk_bytes: list[bytes | None] = [None] * num_chunks
-        self.residuals = np.zeros(3 * edge_from.shape[0])
-        self.dense = np.zeros(plan.dense_size)
-        keep = plan.target >= 0
-        self.dense_target = plan.target[keep]
-        self.dense_source = np.flatnonzero(keep) if not keep.all() else None
-        self.has_jacobians = False
-
-    def take(self, chunk_values: list[FloatArray], with_jacobians: bool) -> None:
-        self.poses.reshape(-1)[:] = np.concatenate(chunk_values)
-        self.chunk_bytes = [values.tobytes() for values in chunk_values]
-        x = self.poses
-        res, jac = edge_terms(
-            x[self.edge_from], x[self.edge_to], self.model, self.losses, with_jacobians
-        )
-        self.residuals[:] = res.reshape(-1)
-        if jac is not None:
-            flat = jac.reshape(-1)
-            self.dense[self.dense_target] = (
-                flat if self.dense_source is None else flat[self.dense_source]
-            )
-        self.has_jacobians = with_jacobians
-
-
-class _SnapshotCost(pyceres.CostFunction):
-    """A zero residual depending on every chunk: evaluating it takes the snapshot."""
-
-    def __init__(self, snapshot: _Snapshot, chunk_sizes: list[int]) -> None:
-        super().__init__()
-        self.snapshot = snapshot
-        self.set_num_residuals(1)
-        self.set_parameter_block_sizes(chunk_sizes)
-
-    def Evaluate(  # noqa: N802 (Ceres' name)
-        self, parameters: list[FloatArray], residuals: FloatArray, jacobians: list | None
-    ) -> bool:
-        self.snapshot.take(parameters, jacobians is not None)
-        residuals[0] = 0.0
-        if jacobians is not None:
-            for block in jacobians:
-                if block is not None:
-                    block.fill(0.0)
-        return True
-
-
-class _EdgeGroupCost(pyceres.CostFunction):
-    """The edges joining one chunk to itself or to one other chunk (contiguous in edge order)."""
-
-    def __init__(
-        self, snapshot: _Snapshot, plan: _Plan, group: int, block_sizes: list[int]
-    ) -> None:
-        super().__init__()
-        first, end = int(plan.group_start[group]), int(plan.group_start[group + 1])
-        self.set_num_residuals(3 * (end - first))
-        self.set_parameter_block_sizes(block_sizes)
-        self.snapshot = snapshot
-        self.plan = plan
-        self.first, self.end = first, end
-        self.chunks = plan.group_chunks[group]
-        self.spans = plan.spans[group]
-        self.r0, self.r1 = 3 * first, 3 * end
-        self.res_view = snapshot.residuals[self.r0 : self.r1]
-        self.jac_views = [snapshot.dense[a:b] for a, b in self.spans]
-        self.two = len(self.chunks) == 2
-
-    def Evaluate(  # noqa: N802 (Ceres' name)
-        self, parameters: list[FloatArray], residuals: FloatArray, jacobians: list | None
-    ) -> bool:
-        snap = self.snapshot
-        stored = snap.chunk_bytes
-        chunks = self.chunks
-        if (
-            (jacobians is None or snap.has_jacobians)
-            and stored[chunks[0]] == parameters[0].tobytes()
-            and (not self.two or stored[chunks[1]] == parameters[1].tobytes())
-        ):
-            residuals[:] = self.res_view
-            if jacobians is not None:
-                views = self.jac_views
-                jacobians[0][:] = views[0]
-                if self.two:
-                    jacobians[1][:] = views[1]
-            return True
-        # Ceres evaluated this block at another point than the snapshot: compute it on its own.
-        plan = self.plan
-        x = np.concatenate(parameters).reshape(-1, 3)
-        edges = slice(self.first, self.end)
-        res, jac = edge_terms(
-            x[plan.local_from[edges]],
-            x[plan.local_to[edges]],
-            snap.model.subset(edges),
-            [_subset_loss(rows, kernel, edges) for rows, kernel in snap.losses],
-            jacobians is not None,
-        )
-        residuals[:] = res.reshape(-1)
-        if jacobians is not None and jac is not None:
-            target = plan.target[18 * self.first : 18 * self.end]
-            keep = target >= 0
-            values = jac.reshape(-1)[keep]
-            target = target[keep]
-            for block, (a, b) in zip(jacobians, self.spans, strict=True):
-                if block is not None:
-                    block.fill(0.0)
-                    mine = (target >= a) & (target < b)
-                    block[target[mine] - a] = values[mine]
-        return True
-
-
 class _EdgeResiduals:
     """The whitened residuals (no kernel) of a graph's edges, in its edge order."""
 
@@ -574,15 +244,6 @@ def _chunk_bounds(n: int, fixed: NDArray[np.bool_], chunk_size: int) -> list[tup
             bounds.append((f, f + 1))
         start = f + 1
     return bounds
-
-
-def _subset_loss(
-    rows: NDArray[np.bool_] | None, kernel: Kernel | Weights, index: IntArray | slice
-) -> tuple[NDArray[np.bool_] | None, Kernel | Weights]:
-    """A loss restricted (and reordered) to the edges ``index``."""
-    if isinstance(kernel, Weights):
-        kernel = Weights(kernel.values[index])
-    return (None if rows is None else rows[index], kernel)
 
 
 def _final_losses(graph: PoseGraph, options: OptimizerOptions) -> EdgeLosses:
@@ -688,20 +349,20 @@ def optimize_pose_graph(
     model = EdgeModel(graph.measurements[order], graph.information[order])
     blocks = [poses[a:b].reshape(-1) for a, b in bounds]
     sizes = [3 * (b - a) for a, b in bounds]
-    plan = _plan_groups(edge_from, edge_to, chunk_of, chunk_start, chunk_len)
+    plan = plan_groups(edge_from, edge_to, chunk_of, chunk_start, chunk_len)
 
     def sorted_losses(losses: EdgeLosses) -> EdgeLosses:
-        return [_subset_loss(rows, kernel, order) for rows, kernel in losses]
+        return [subset_loss(rows, kernel, order) for rows, kernel in losses]
 
-    snapshot = _Snapshot(
+    snapshot = Snapshot(
         poses, edge_from, edge_to, model, sorted_losses(final_losses), plan, len(bounds)
     )
 
     problem = pyceres.Problem()
-    problem.add_residual_block(_SnapshotCost(snapshot, sizes), None, blocks)
+    problem.add_residual_block(SnapshotCost(snapshot, sizes), None, blocks)
     for group, chunks in enumerate(plan.group_chunks):
         problem.add_residual_block(
-            _EdgeGroupCost(snapshot, plan, group, [sizes[c] for c in chunks]),
+            EdgeGroupCost(snapshot, plan, group, [sizes[c] for c in chunks]),
             None,
             [blocks[c] for c in chunks],
         )

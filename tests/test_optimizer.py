@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from app.cli import main
-from cogmap_core import optimizer
+from cogmap_core import ceres_blocks, optimizer
 from cogmap_core.errors import OptimizationError, ParameterError
 from cogmap_core.g2o import read_g2o
 from cogmap_core.geometry import compose, polar_to_relative, wrap_angle
@@ -238,14 +238,14 @@ def test_an_edge_group_away_from_the_snapshot_computes_its_own_edges(monkeypatch
     Evaluated elsewhere (at a point the snapshot did not take, or for Jacobians the snapshot
     does not hold) it computes its own edges: the same values as from a snapshot taken there.
     """
-    groups: list[optimizer._EdgeGroupCost] = []
-    real_init = optimizer._EdgeGroupCost.__init__
+    groups: list[ceres_blocks.EdgeGroupCost] = []
+    real_init = ceres_blocks.EdgeGroupCost.__init__
 
     def keep(self, *args, **kwargs):
         real_init(self, *args, **kwargs)
         groups.append(self)
 
-    monkeypatch.setattr(optimizer._EdgeGroupCost, "__init__", keep)
+    monkeypatch.setattr(ceres_blocks.EdgeGroupCost, "__init__", keep)
     graph = laps_graph(2, 12)
     optimize_pose_graph(graph, OptimizerOptions(chunk_size=4, huber_scale=0.5))
     snapshot = groups[0].snapshot
@@ -269,7 +269,7 @@ def test_an_edge_group_away_from_the_snapshot_computes_its_own_edges(monkeypatch
         assert not np.array_equal(snapshot.residuals, 0)
 
 
-def chunk_spans(snapshot: optimizer._Snapshot, groups: list) -> list[tuple[int, int]]:
+def chunk_spans(snapshot: ceres_blocks.Snapshot, groups: list) -> list[tuple[int, int]]:
     """The chunks' row ranges in the snapshot's poses, from the groups' Jacobian layout."""
     count = len(snapshot.chunk_bytes)
     sizes = [0] * count
