@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 from app.palette import cluster_color
 from cogmap_core.cognitive_map import CognitiveMap
 from cogmap_core.edge_noise import edge_information
-from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.edge_residuals import EdgeModel, edge_terms
+from cogmap_core.map_graph import MapSnapshot
 
 FloatArray = NDArray[np.float64]
 UInt8Array = NDArray[np.uint8]
