@@ -22,6 +22,7 @@ from cogmap_core.frames import Frame
 from cogmap_core.frontend import FrontEndConfig
 from cogmap_core.frontend.visual_odometry import VisualOdometry, best_shift, with_visual_odometry
 from cogmap_core.sources.detect import detect_format
+from tests import test_server_support as server_support
 
 LOOP = """\
 ; cell: 0.3
@@ -335,3 +336,21 @@ def test_each_camera_input_gets_its_own_front_end_settings(tmp_path: Path) -> No
     assert resolve_frontend(None, folder) == frontend_config_for(folder)
     made = resolve_frontend(lambda p: FrontEndConfig(camera_fov_deg=len(p.name)), folder)
     assert made.camera_fov_deg == 3
+
+
+short_bag = server_support.short_bag  # the web-app tests' session fixture
+
+
+def test_the_page_opens_a_bag_with_serve_s_odometry_choice(short_bag: Path) -> None:
+    # a bag chosen on the page is read as serve's --odometry says, like the one served first
+    from app.inputs import InputOptions
+    from cogmap_core.sources.detect import CameraOptions
+    from tests.test_server_support import running_app, wait
+
+    read = InputOptions(camera=CameraOptions(odometry="visual"))
+    with running_app(short_bag, input_options=read, data_dirs=[short_bag.parent]) as app:
+        wait(app)
+        assert app.replay.reader is not None and app.replay.reader.visual_odometry
+        assert app.open_bag(short_bag.name), app.open_md.content
+        wait(app)
+        assert app.replay.reader is not None and app.replay.reader.visual_odometry

@@ -17,7 +17,6 @@ import viser
 
 from app.server.panels import note_html
 from app.server.validation import GuiGate, choice, click
-from cogmap_core.datasets import open_bag
 from cogmap_core.errors import CogmapError
 from cogmap_core.sources.detect import KINDS, LogOptions, Source, open_source
 
@@ -150,13 +149,13 @@ class InputChooser:
         options = self.host.input_options
         try:
             chosen = self.data.check(chosen)
-            if chosen.kind == "bag":
-                reader = open_bag(
-                    chosen.path, topics=options.topics, image_scale=options.image_scale
-                )
-            elif KINDS[chosen.kind].has_camera:  # a video or image folder (serve's --fps)
-                reader = open_source(
-                    chosen.path, chosen.kind, camera=options.camera_for(chosen.path)
+            if KINDS[chosen.kind].has_camera:  # a bag, video or image folder: serve's options
+                reader = open_source(  # (--odometry, --fps, topics, and the input's front end)
+                    chosen.path,
+                    chosen.kind,
+                    topics=options.topics,
+                    image_scale=options.image_scale,
+                    camera=options.camera_for(chosen.path),
                 )
             else:  # a log: read (and checked) whole, as cogmap serve FILE reads it
                 reader = open_source(chosen.path, chosen.kind, log=LogOptions())
