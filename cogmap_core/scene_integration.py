@@ -22,8 +22,9 @@ edges just removed) -- when
    optimiser weighs them, are at most ``integration_max_residual`` (an edge the optimisation
    could not satisfy is no evidence). That is the closing link; and, when a link alone
    re-localised the robot where the run began (below), that link must be one the loop-closure
-   model keeps -- its residual within the model's scale (``loop_scale`` link sigmas) -- since a
-   false match that opened a run says nothing about where its vertices belong; and
+   model keeps (:func:`~cogmap_core.optimizer.rejected_loop_closures`' rule: its residual
+   within the model's scale) -- a false match that opened a run says nothing about where its
+   vertices belong; and
 3. every vertex of the run lies within ``integration_radius`` of an edge of known ground (an
    edge whose vertices are at least ``integration_min_age`` older than the run): the run
    re-walked mapped corridors.
@@ -259,11 +260,13 @@ def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:
         return True  # the opening link made no edge of its own (it duplicated one)
     if graph.edge_from[k] != robot:
         robot, place = place, robot
-    opening = tuple(graph.edge_rel[k].tolist())
+    model = params.loop_closure_model()
+    if model is None:
+        return True  # the paper's Huber rejects no link
     # it need not have converged (the run's end is judged by the closing link): it must only be
-    # a link the loop model keeps, within its scale
-    rejected_past = params.loop_scale * params.link_sigma_position
-    return _link_residual(graph, robot, place, opening, params) <= rejected_past
+    # a link the loop model keeps (the residual is the optimiser's whitened one, so chi^2 = r^2)
+    residual = _link_residual(graph, robot, place, tuple(graph.edge_rel[k].tolist()), params)
+    return not bool(model.final_kernel.rejects(np.array([residual * residual]))[0])
 
 
 def _link_residual(
