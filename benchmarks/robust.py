@@ -189,7 +189,7 @@ def part_b(quick: bool) -> list[float]:
         print(f"  {label}: {params.loop_closure_model()}")
         print(
             f"    {'log':34} {'DR m':>6} {'links':>5} {'prec':>5} {'x real':>6} | "
-            + " | ".join(f"{m.value[:8]:>8} ATE  true  ratio" for m in MapMode)
+            + " | ".join(f"{m.value[:8]:>8} ATE  true  ratio     V compl  corr" for m in MapMode)
         )
         worst: list[float] = []
         for name, path in generated_logs(cache_dir() / "bench" / "logs", quick):
@@ -209,9 +209,14 @@ def part_b(quick: bool) -> list[float]:
                 f"{score.precision:5.2f} {log.frame_time[-1] / wall:6.0f} |"
             )
             for mode in MapMode:
-                ate = session.ate(session.maps[mode])  # type: ignore[attr-defined]
+                cmap = session.maps[mode]  # type: ignore[attr-defined]
+                ate = session.ate(cmap)  # type: ignore[attr-defined]
                 ref = reference.ate(reference.maps[mode])  # type: ignore[attr-defined]
-                row += f" {ate:12.2f} {ref:5.2f} {ate / ref:6.2f} |"
+                fid = session.layout_fidelity(cmap, reader.evaluation.layout_radius)  # type: ignore[attr-defined]
+                row += (
+                    f" {ate:12.2f} {ref:5.2f} {ate / ref:6.2f} {cmap.num_vertices:5d}"
+                    f" {fid.completeness:5.2f} {fid.correctness:5.2f} |"
+                )
                 worst.append(ate / ref)
             print(row, flush=True)
         values = np.array(worst)
