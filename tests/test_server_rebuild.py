@@ -182,11 +182,17 @@ def test_the_app_rebuilds_exactly_what_cogmap_run_builds(
     with running_app(short_bag) as app:
         assert app.wait_idle(60)
         assert app.replay.builder.workers == 2
+        first_new = len(app.replay.rebuilds)
         for name in ("delta", "t_interval", "t_total"):
             app.param_sliders[name].value = getattr(params, name)
         assert app.wait_idle(60)
-        record = app.replay.rebuilds[-1]
-        assert record.completed and set(record.how.values()) == {"built"}
+        # The three values may reach the worker in one rebuild or in several (one per slider, as
+        # they arrive); a later one keeps a map an earlier one built when its schedule is the same.
+        records = app.replay.rebuilds[first_new:]
+        assert records and records[-1].completed
+        for mode in MapMode:
+            assert any(r.how.get(mode) == "built" for r in records)
+            assert {r.how.get(mode) for r in records} <= {"built", "kept", None}
         rebuilt = reference.rebuild(params)
         for mode in MapMode:
             shown = app.replay.session.maps[mode]
