@@ -9,9 +9,10 @@ integral image gives exactly). :func:`decode_peak` is the pose cells' peak decod
 same sums in the same order (sequential double additions, ``atan2`` of the C library as CPython
 uses it).
 
-numba is optional: without it, when compiling fails, or with ``COGMAP_COMPILED_FRONTEND=0``,
-:func:`kernels` returns None and the front end runs its numpy code (the same results). Compiled
-code is cached on disk where :func:`cogmap_core.compiled_replay.choose_cache` says.
+numba is optional: without it, when compiling fails, with ``COGMAP_COMPILED_FRONTEND=0``, or
+in a program that prefers the numpy code (:func:`prefer_compiled`), :func:`kernels` returns
+None and the front end runs its numpy code (the same results). Compiled code is cached on disk
+where :func:`cogmap_core.compiled_replay.choose_cache` says.
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ ENV_SWITCH = "COGMAP_COMPILED_FRONTEND"
 
 _KERNELS: SimpleNamespace | None = None
 _LOADED = False
+#: Whether :func:`kernels` gives the compiled loops when :data:`ENV_SWITCH` is unset
+#: (:func:`prefer_compiled`).
+_PREFERRED = True
 
 
 def _block_sums(flat: Any, depth: int, rows: Any, cols: Any, out: Any) -> None:
@@ -270,14 +274,28 @@ _COMPILED = (
 )
 
 
+def prefer_compiled(compiled: bool) -> None:
+    """Whether front ends made from now on use the compiled loops when the switch is unset.
+
+    ``COGMAP_COMPILED_FRONTEND`` decides when it is set (``0`` never, anything else always).
+    Unset, the loops are used unless a program preferred the numpy code: ``cogmap run`` does,
+    since loading numba and LLVM for them raises its peak memory by ~100 MB for a ~1.1x shorter
+    run, while the web app and sweeps load numba for their compiled map replay anyway.
+    """
+    global _PREFERRED
+    _PREFERRED = compiled
+
+
 def kernels() -> SimpleNamespace | None:
     """The compiled loops (``match_pairs``, ``block_sums``, ``decode_peak``), or None.
 
     Compiled (or loaded from the cache) on the first call; None when numba is missing, fails,
-    or ``COGMAP_COMPILED_FRONTEND=0``.
+    when ``COGMAP_COMPILED_FRONTEND=0``, or when the switch is unset and the program preferred
+    the numpy code (:func:`prefer_compiled`).
     """
     global _KERNELS, _LOADED
-    if os.environ.get(ENV_SWITCH, "1") == "0":
+    switch = os.environ.get(ENV_SWITCH)
+    if switch == "0" or (switch is None and not _PREFERRED):
         return None
     if not _LOADED:
         _LOADED = True
