@@ -53,11 +53,12 @@ from app.server.replay import PlaybackState, RebuildRecord  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.event_log import EventLog  # noqa: E402
+from cogmap_core.map_modes import ALL_MODES  # noqa: E402
 
 TARGET_S = 0.200
 LONG_TARGET_S = 2.0  # issue 27: exact map within 2 s on 60 laps
 MODES = (MapMode.COMPACT, MapMode.SCENE_INTEGRATION, MapMode.STANDARD)
-ORDER = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+ORDER = ALL_MODES
 #: Fresh values per slider (the paper's: alpha = beta = 10, delta = 3.746, 2 s, 100 s).
 VALUES: dict[str, tuple[float, ...]] = {
     "alpha": (20.0, 5.0, 40.0, 15.0, 30.0),
