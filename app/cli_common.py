@@ -13,6 +13,7 @@ from cogmap_core.datasets.profile import read_frontend_profile
 from cogmap_core.datasets.topics import GROUND_TRUTH_TOPIC, IMAGE_TOPIC, ODOMETRY_TOPIC, BagTopics
 from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.frontend import FrontEndConfig
+from cogmap_core.parameter_table import FLAG_PARAMETERS, flag_name
 from cogmap_core.sources.detect import (
     FORMATS,
     KINDS,
@@ -59,12 +60,9 @@ def topics_from_args(args: argparse.Namespace) -> BagTopics:
     )
 
 
-_MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
-    ("alpha", "--alpha", "translation weight, >= 0"),
-    ("beta", "--beta", "rotation weight, >= 0"),
-    ("delta", "--delta", "field threshold, > 1"),
-    ("t_interval", "--t-interval", "cluster interval threshold (s), > 0"),
-    ("t_total", "--t-total", "cluster total-time threshold (s), > 0"),
+#: The map parameters with an option of their own: (name, flag, help), from the parameter table.
+_MAP_ARGUMENTS: tuple[tuple[str, str, str], ...] = tuple(
+    (p.name, flag_name(p.name), f"{p.flag_help}, {p.lower_bound_text()}") for p in FLAG_PARAMETERS
 )
 _PAPER_FLAGS = tuple(name for name, _, _ in _MAP_ARGUMENTS)
 
@@ -130,7 +128,7 @@ def map_changes_from_args(args: argparse.Namespace) -> dict[str, float]:
         if not sep or not name:
             raise ParameterError(f"--param {item!r}: expected NAME=VALUE, e.g. huber_scale=0.2")
         if name in _PAPER_FLAGS:
-            raise ParameterError(f"--param {name}: use --{name.replace('_', '-')} instead")
+            raise ParameterError(f"--param {name}: use {flag_name(name)} instead")
         try:
             changes[name] = float(text)
         except ValueError:

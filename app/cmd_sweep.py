@@ -33,6 +33,7 @@ from app.sweep import (
 )
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.parameter_table import flag_name
 from cogmap_core.sweep import (
     MIN_COMPLETENESS,
     PARAMETER_NAMES,
@@ -265,9 +266,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "map parameters", "values of any map parameter: LOW:HIGH:COUNT, A,B,C or a single value"
     )
     for name in PARAMETER_NAMES:
-        group.add_argument(
-            "--" + name.replace("_", "-"), dest=f"sweep_{name}", default=None, metavar="VALUES"
-        )
+        group.add_argument(flag_name(name), dest=f"sweep_{name}", default=None, metavar="VALUES")
     group.add_argument(
         "--param",
         action="append",

@@ -36,6 +36,7 @@ from app.palette import (
 from cogmap_core.cognitive_map import EdgeKind, MapMode
 from cogmap_core.fileio import write_bytes_atomic
 from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.map_modes import ALL_MODES
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -231,7 +232,7 @@ def _map_legend(figure: Figure, truth: bool, false: bool) -> None:
 
     handles = [
         Line2D([], [], color=map_color(m), marker="o", ms=3, lw=1.0, label=f"{_name(m)} map")
-        for m in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+        for m in ALL_MODES
     ]
     handles.append(Line2D([], [], color=LOOP_COLOR, lw=0.7, label="loop closures"))
     if false:

@@ -21,6 +21,7 @@ from cogmap_core.datasets import BagReader
 from cogmap_core.datasets.camera_common import CameraReader
 from cogmap_core.evaluation import MapAccuracy, map_accuracy
 from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.parameter_table import PAPER_PARAMETERS
 from cogmap_core.slam import (
     ALL_MODES,
     SlamSession,
@@ -167,13 +168,7 @@ def session_summary(
         "data_duration_s": round(duration, 6),
         "wall_s": round(wall, 6),
         "realtime_factor": round(duration / wall, 3) if wall > 0 else None,
-        "params": {
-            "alpha": p.alpha,
-            "beta": p.beta,
-            "delta": p.delta,
-            "t_interval": p.t_interval,
-            "t_total": p.t_total,
-        },
+        "params": {name: getattr(p, name) for name in PAPER_PARAMETERS},
         "layout_radius_m": layout_radius,
         "dead_reckoning_ate_m": None if dead_reckoning is None else round(dead_reckoning, 6),
         "maps": entries,

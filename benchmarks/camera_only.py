@@ -27,13 +27,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.datasets.cache import DATASET_VERSION, cache_dir  # noqa: E402
 from cogmap_core.datasets.camera_writer import generate_camera_only  # noqa: E402
 from cogmap_core.datasets.generator import MazeConfig  # noqa: E402
 from cogmap_core.datasets.layout import DEFAULT_LAYOUT  # noqa: E402
 from cogmap_core.datasets.profile import frontend_config_for  # noqa: E402
 from cogmap_core.evaluation import map_accuracy  # noqa: E402
+from cogmap_core.map_modes import ALL_MODES  # noqa: E402
 from cogmap_core.slam import SlamSession  # noqa: E402
 from cogmap_core.sources.detect import KINDS, CameraOptions, open_source  # noqa: E402
 
@@ -76,7 +76,7 @@ def run(path: Path) -> bool:
     print(f"{path.name}: {log.frames} frames, {duration:.1f} s of data")
     print(f"  visual dead reckoning ATE {dead:.3f} m (the reference)")
     ok = True
-    for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
+    for mode in ALL_MODES:
         snapshot = session.maps[mode].snapshot()
         truth = log.truth_at(snapshot.vertex_time)
         assert truth is not None

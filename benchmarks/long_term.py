@@ -43,10 +43,11 @@ from cogmap_core.datasets import open_bag
 from cogmap_core.datasets.generator import MazeConfig, plan_dataset
 from cogmap_core.datasets.profile import frontend_config_for
 from cogmap_core.evaluation import LAYOUT_RADIUS
+from cogmap_core.map_modes import ALL_MODES
 from cogmap_core.session_file import SessionMeta, load_session, save_session
 from cogmap_core.slam import SlamSession
 
-MODES = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+MODES = ALL_MODES
 SHORT = {MapMode.STANDARD: "std", MapMode.SCENE_INTEGRATION: "si", MapMode.COMPACT: "cmp"}
 STAGES = ("read", "frontend", "log", *(m.value for m in MODES))
 

@@ -48,9 +48,10 @@ from cogmap_core.datasets.generator import MazeConfig, generate_maze_bag, plan_d
 from cogmap_core.event_file import EventRecording
 from cogmap_core.event_log import EventLog
 from cogmap_core.frontend.config import COGMAP_ARITHMETIC
+from cogmap_core.map_modes import ALL_MODES
 
 LAYOUTS = ("irat_australia", "figure_eight", "long_corridors", "junction_dead_end")
-MODES = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+MODES = ALL_MODES
 
 
 @dataclass

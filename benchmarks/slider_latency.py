@@ -53,11 +53,13 @@ from app.server.replay import PlaybackState, RebuildRecord  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.event_log import EventLog  # noqa: E402
+from cogmap_core.map_modes import ALL_MODES  # noqa: E402
+from cogmap_core.parameter_table import PARAMETERS  # noqa: E402
 
 TARGET_S = 0.200
 LONG_TARGET_S = 2.0  # issue 27: exact map within 2 s on 60 laps
 MODES = (MapMode.COMPACT, MapMode.SCENE_INTEGRATION, MapMode.STANDARD)
-ORDER = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+ORDER = ALL_MODES
 #: Fresh values per slider (the paper's: alpha = beta = 10, delta = 3.746, 2 s, 100 s).
 VALUES: dict[str, tuple[float, ...]] = {
     "alpha": (20.0, 5.0, 40.0, 15.0, 30.0),
@@ -66,7 +68,7 @@ VALUES: dict[str, tuple[float, ...]] = {
     "t_interval": (3.0, 1.0, 2.5, 4.0, 1.5),
     "t_total": (50.0, 30.0, 70.0, 20.0, 60.0),
 }
-SHORT = {"alpha": "α", "beta": "β", "delta": "δ", "t_interval": "T_interval", "t_total": "T_total"}
+SHORT = {name: PARAMETERS[name].label for name in VALUES}  # the sliders' labels
 
 
 def loaded_app(bag: Path, port: int) -> tuple[CogmapApp, viser.ViserServer]:

@@ -38,6 +38,7 @@ from cogmap_core import optimizer  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.event_log import EventLog  # noqa: E402
+from cogmap_core.map_modes import ALL_MODES  # noqa: E402
 
 #: The optimiser before the solves were made faster (issue 27, part 3).
 BASELINE = "58bc9db"
@@ -113,7 +114,7 @@ def main() -> int:
         f"{'map':18s} {'solves':>6s} {'old ms':>8s} {'new ms':>8s} {'old/new':>8s} {'max diff':>9s}"
     )
     figures: dict[MapMode, tuple[int, float, float]] = {}
-    for mode in (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
+    for mode in ALL_MODES:
         calls = recorded_solves(log, mode)
         solve_all(old, calls)  # warm both up (imports, caches)
         solve_all(optimizer, calls)

@@ -40,7 +40,6 @@ from __future__ import annotations
 import math
 import time as wallclock
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,6 +50,7 @@ from cogmap_core.errors import EventError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.geometry import TWO_PI, compose, compose_scalar, inverse_scalar, wrap_scalar
 from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot
+from cogmap_core.map_modes import ALL_MODES, MapMode
 from cogmap_core.neighborhood_fields import is_novel, neighborhood_field
 from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph, rejected_loop_closures
 from cogmap_core.posegraph import PoseGraph
@@ -65,14 +65,6 @@ from cogmap_core.short_edges import remove_short_edges
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 _ZERO = (0.0, 0.0, 0.0)
-
-
-class MapMode(StrEnum):
-    """Which of the paper's three maps to build."""
-
-    STANDARD = "standard"
-    SCENE_INTEGRATION = "scene_integration"
-    COMPACT = "compact"
 
 
 @dataclass(frozen=True, slots=True)
@@ -540,7 +532,7 @@ class MapSet:
     ) -> None:
         """Create one :class:`CognitiveMap` per mode (default: all three)."""
         if modes is None:
-            modes = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
+            modes = ALL_MODES
         self.maps: dict[MapMode, CognitiveMap] = {m: CognitiveMap(m, params) for m in modes}
 
     def apply(self, event: MapEvent) -> None:

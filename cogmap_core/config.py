@@ -7,32 +7,14 @@ from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 from cogmap_core.errors import ParameterError
+from cogmap_core.parameter_table import MAP_PARAMETERS
 from cogmap_core.robust import MAP_IRLS_TOLERANCE, LoopClosureModel, loop_closure_model
 
 # name -> (lower bound, lower bound inclusive?, upper bound, meaning); upper bound inclusive.
 _RANGES: dict[str, tuple[float, bool, float, str]] = {
-    "alpha": (0.0, True, 1e6, "weight of translation in the neighborhood field (1/m)"),
-    "beta": (0.0, True, 1e6, "weight of rotation in the neighborhood field (1/rad)"),
-    "delta": (1.0, False, 1e12, "neighborhood field threshold (g > delta adds a vertex)"),
-    "t_interval": (0.0, False, 1e9, "loop-closure cluster time-interval threshold (s)"),
-    "t_total": (0.0, False, 1e9, "loop-closure cluster total-time threshold (s)"),
-    "huber_scale": (0.0, False, 1e9, "Huber loss scale of the batch optimisation (m, rad)"),
-    "short_edge_threshold": (0.0, True, 1e9, "edges shorter than this are removed (m)"),
-    "integration_radius": (0.0, True, 1e9, "max distance of a revisit to merge it (m)"),
-    "integration_max_residual": (0.0, True, 1e9, "max loop-edge residual to merge a revisit"),
-    "integration_min_age": (0.0, True, 1e9, "min age of the vertex a revisit merges into (s)"),
-    "gate_position": (0.0, True, 1e9, "relocalisation test: position tolerance (m)"),
-    "gate_heading": (0.0, True, 1e9, "relocalisation test: heading tolerance (rad)"),
-    "gate_drift_position": (0.0, True, 1e9, "relocalisation test: position drift per metre"),
-    "gate_drift_heading": (0.0, True, 1e9, "relocalisation test: heading drift per metre (rad/m)"),
-    "gate_consensus": (0.0, True, 1e9, "relocalisation test: agreeing refusals that win (0: off)"),
-    "edge_noise_model": (0.0, True, 1.0, "1: weigh edges by expected precision, 0: identity"),
-    "link_sigma_position": (0.0, False, 1e6, "position precision of a loop-closure link (m)"),
-    "link_sigma_heading": (0.0, False, 1e6, "heading precision of a loop-closure link (rad)"),
-    "loop_model": (0.0, True, 5.0, "robust loop-closure model (0 the paper's Huber; see robust)"),
-    "loop_scale": (0.0, False, 1e6, "scale of the robust loop-closure model (link sigmas)"),
+    p.name: (*p.valid, p.meaning) for p in MAP_PARAMETERS
 }
-_WHOLE_NUMBERS = frozenset({"loop_model"})
+_WHOLE_NUMBERS = frozenset(p.name for p in MAP_PARAMETERS if p.whole_number)
 """Parameters that are codes: only whole numbers are valid."""
 
 

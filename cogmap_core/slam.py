@@ -35,9 +35,9 @@ from cogmap_core.events import MapEvent
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.map_modes import ALL_MODES
 
 FloatArray = NDArray[np.float64]
-ALL_MODES: tuple[MapMode, ...] = (MapMode.STANDARD, MapMode.SCENE_INTEGRATION, MapMode.COMPACT)
 
 
 @dataclass(frozen=True, slots=True)

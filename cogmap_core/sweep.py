@@ -51,13 +51,11 @@ from cogmap_core.config import MapParams, validate_parameter
 from cogmap_core.errors import ParameterError
 from cogmap_core.evaluation import LAYOUT_RADIUS
 from cogmap_core.event_log import EventLog
+from cogmap_core.parameter_table import PAPER_PARAMETERS  # the five the paper fixes
 from cogmap_core.slam import optimisation_summary
 
 PARAMETER_NAMES: tuple[str, ...] = tuple(f.name for f in fields(MapParams))
 """Every sweepable parameter, in :class:`MapParams` order."""
-
-PAPER_PARAMETERS: tuple[str, ...] = ("alpha", "beta", "delta", "t_interval", "t_total")
-"""The parameters the paper fixes (alpha = beta = 10, delta = 3.746, 2 s, 100 s)."""
 
 GROWTH_FRACTION = 0.5
 """The size change is measured over this last fraction of the data (the second half)."""

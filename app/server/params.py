@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from app.server.validation import Adjusted, Check, Refused
 from cogmap_core.config import parameter_range
 from cogmap_core.errors import ParameterError
+from cogmap_core.parameter_table import SLIDER_PARAMETERS, MapParameter
 
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
 
@@ -39,29 +40,22 @@ class SliderSpec:
     hint: str
 
 
-#: The tuning sliders (ranges inside the valid parameter ranges of :class:`MapParams`).
-SLIDERS: tuple[SliderSpec, ...] = (
-    SliderSpec("α", "alpha", 0.0, 50.0, 0.1, "translation weight of the neighborhood field (1/m)"),
-    SliderSpec("β", "beta", 0.0, 50.0, 0.1, "rotation weight of the neighborhood field (1/rad)"),
-    SliderSpec("δ", "delta", 1.05, 30.0, 0.001, "add a vertex only when g(d, θ) > δ"),
-    SliderSpec("T_interval", "t_interval", 0.1, 20.0, 0.1, "cluster interval threshold (s)"),
-    SliderSpec("T_total", "t_total", 1.0, 500.0, 1.0, "cluster total-time threshold (s)"),
+def slider_spec(parameter: MapParameter) -> SliderSpec:
+    """The slider of a map parameter, as its row of the parameter table describes it."""
+    slider, label = parameter.slider, parameter.label
+    if slider is None or label is None:
+        raise ParameterError(f"map parameter {parameter.name} has no slider with a label")
+    return SliderSpec(label, parameter.name, slider.low, slider.high, slider.step, slider.hint)
+
+
+#: The tuning sliders, in the page's order (ranges inside the valid parameter ranges of
+#: :class:`MapParams`), from the parameter table (:mod:`cogmap_core.parameter_table`).
+SLIDERS: tuple[SliderSpec, ...] = tuple(
+    slider_spec(p) for p in SLIDER_PARAMETERS if p.slider is not None and not p.slider.advanced
 )
-ADVANCED_SLIDERS: tuple[SliderSpec, ...] = (
-    SliderSpec(
-        "Huber scale",
-        "huber_scale",
-        0.01,
-        2.0,
-        0.01,
-        "Huber loss scale (m, rad): odometry edges; every edge with the paper's loop model",
-    ),
-    SliderSpec(
-        "loop scale", "loop_scale", 0.2, 50.0, 0.1, "robust loop-closure kernel scale (link σ)"
-    ),
-    SliderSpec(
-        "short edge (m)", "short_edge_threshold", 0.0, 0.5, 0.005, "edges shorter are removed"
-    ),
+#: The sliders of the "Advanced" folder.
+ADVANCED_SLIDERS: tuple[SliderSpec, ...] = tuple(
+    slider_spec(p) for p in SLIDER_PARAMETERS if p.slider is not None and p.slider.advanced
 )
 ALL_SLIDERS = SLIDERS + ADVANCED_SLIDERS
 SPECS = {spec.name: spec for spec in ALL_SLIDERS}

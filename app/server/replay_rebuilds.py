@@ -23,38 +23,18 @@ from app.server.replay_state import PlaybackState, RebuildRecord
 from app.server.schedule import same_schedule
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
+from cogmap_core.parameter_table import PARAMETERS_USED
 from cogmap_core.slam import ALL_MODES, SlamSession
 
 if TYPE_CHECKING:
     from cogmap_core.sources.detect import Source
 
-_CLUSTERING_AND_OPTIMISATION = frozenset(
-    {
-        "t_interval",
-        "t_total",
-        "huber_scale",
-        "edge_noise_model",
-        "link_sigma_position",
-        "link_sigma_heading",
-        "gate_position",
-        "gate_heading",
-        "gate_drift_position",
-        "gate_drift_heading",
-        "gate_consensus",
-        "loop_model",
-        "loop_scale",
-    }
-)
-_INTEGRATION = frozenset({"integration_radius", "integration_max_residual", "integration_min_age"})
-#: The map parameters each map depends on. A change of other parameters leaves a map exactly as
+#: The map parameters each map depends on (the ``maps`` of each row of the parameter table,
+#: :mod:`cogmap_core.parameter_table`). A change of other parameters leaves a map exactly as
 #: it is, so its rebuild is skipped (the neighborhood field and short-edge removal belong to the
 #: compact map only, scene integration to the two non-standard maps). The tests rebuild every map
 #: for a change of every parameter and check this table.
-PARAMS_USED: dict[MapMode, frozenset[str]] = {
-    MapMode.STANDARD: _CLUSTERING_AND_OPTIMISATION,
-    MapMode.SCENE_INTEGRATION: _CLUSTERING_AND_OPTIMISATION | _INTEGRATION,
-    MapMode.COMPACT: frozenset(MapParams().to_dict()),
-}
+PARAMS_USED: dict[MapMode, frozenset[str]] = PARAMETERS_USED
 
 
 def needs_rebuild(mode: MapMode, old: MapParams, new: MapParams) -> bool:

@@ -76,6 +76,7 @@ from app.server.scene_style import (
     union,
 )
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
+from cogmap_core.map_modes import ALL_MODES
 
 __all__ = [  # (with the page's colours, from app.palette)
     "CLUSTER_PALETTE",
@@ -177,9 +178,7 @@ class SceneStreamer:
     exported replay, a client that has not been set up yet).
     """
 
-    def __init__(
-        self, server: viser.ViserServer, modes: Iterable[MapMode] = tuple(MapMode)
-    ) -> None:
+    def __init__(self, server: viser.ViserServer, modes: Iterable[MapMode] = ALL_MODES) -> None:
         """Create the scene's layers (empty) for ``modes``."""
         self.server = server
         # Flat 2-D maps cast no useful shadows; without them a moving robot does not make the

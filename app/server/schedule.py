@@ -15,9 +15,11 @@ from cogmap_core.clustering import cluster_schedule
 from cogmap_core.config import MapParams
 from cogmap_core.event_file import KIND_LINK
 from cogmap_core.event_log import EventLog
+from cogmap_core.parameter_table import CLUSTERING_PARAMETERS
 
-#: The parameters of the loop-closure clustering (the cluster schedule).
-SCHEDULE_PARAMS = frozenset({"t_interval", "t_total"})
+#: The parameters of the loop-closure clustering (the cluster schedule): the parameter table's
+#: (:data:`~cogmap_core.parameter_table.CLUSTERING_PARAMETERS`).
+SCHEDULE_PARAMS: frozenset[str] = CLUSTERING_PARAMETERS
 
 
 def same_schedule(

@@ -24,8 +24,9 @@ from app.server.scene_style import ERROR_RAMP_CSS, ERROR_SCALE_MAX, TIME_RAMP_CS
 from app.server.validation import GuiGate, boolean, choice, click
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.evaluation import EvaluationSettings
+from cogmap_core.map_modes import ALL_MODES
 
-MODE_NAMES: tuple[str, ...] = tuple(m.value for m in MapMode)
+MODE_NAMES: tuple[str, ...] = tuple(m.value for m in ALL_MODES)
 COLOURING_LABELS: dict[str, str] = {
     "cluster": "loop closures by cluster",
     "time": "time",
