@@ -257,7 +257,8 @@ class ReplayRebuilds:
                 record.how[mode] = "kept"
             else:
                 cmap = self.cache.take(self.cache.key(mode, params, frames, finish, self._log_id))
-                record.how[mode] = "cached"
+                if cmap is not None:  # (a miss is built below; an abandoned build says nothing)
+                    record.how[mode] = "cached"
             if cmap is None:
                 tasks.append(BuildTask(mode, params, frames, finish))
                 continue
