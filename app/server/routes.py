@@ -44,7 +44,7 @@ from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import CogmapError
 from cogmap_core.evaluation import RigidTransform2D
-from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.map_graph import MapSnapshot, nearest_vertex
 from cogmap_core.routes import NoRouteError, Route, RouteMap, true_path_graph
 
 FloatArray = NDArray[np.float64]
@@ -394,11 +394,11 @@ def nearest_map(
     """
     best: tuple[float, Place] | None = None
     for mode, offset in offsets.items():
-        snap = snapshots[mode]
         local = (float(point[0]) - offset, float(point[1]))
-        if snap.poses.shape[0] == 0:
+        found = nearest_vertex(snapshots[mode].poses, local)
+        if found is None:
             continue
-        d = float(np.min(np.hypot(snap.poses[:, 0] - local[0], snap.poses[:, 1] - local[1])))
+        d = found[1]
         if best is None or d < best[0]:
             best = (d, Place(mode, local))
     return None if best is None else best[1]
