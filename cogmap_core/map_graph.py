@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +34,9 @@ from cogmap_core.geometry import (
     wrap_scalar,
 )
 from cogmap_core.posegraph import PoseGraph
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -94,6 +99,30 @@ def _edge_rows(
     rows = np.searchsorted(vertex_ids, np.r_[edge_from, edge_to])
     m = edge_from.shape[0]
     return rows[:m], rows[m:]
+
+
+def nearest_vertex(
+    poses: FloatArray, point: Sequence[float] | FloatArray, tree: cKDTree | None = None
+) -> tuple[int, float] | None:
+    """The row of ``poses`` nearest to place ``point`` and its distance (m); None when empty.
+
+    The one rule for picking a map's vertex by a place -- the vertex a click inspects, the map a
+    route's click lies on, the vertex a route's end snaps to: the distance in x, y (``np.hypot``
+    over ``poses[:, :2]`` to ``point[:2]``), the first row on a tie (``argmin``).
+
+    ``tree``: a :class:`scipy.spatial.cKDTree` of ``poses[:, :2]``, for many look-ups on one
+    large map (:meth:`cogmap_core.routes.RouteMap.snap`). The tree's query is used instead: its
+    distance is the square root of the summed squares, which can differ from ``np.hypot`` in
+    the last bit, and on an exact tie it takes the row it reaches first.
+    """
+    if poses.shape[0] == 0:
+        return None
+    if tree is not None:
+        distance, row = tree.query(np.asarray(point, dtype=np.float64)[:2])
+        return int(row), float(distance)
+    d = np.hypot(poses[:, 0] - point[0], poses[:, 1] - point[1])
+    k = int(np.argmin(d))
+    return k, float(d[k])
 
 
 def grow_array(array: NDArray, size: int, fill: float = 0) -> NDArray:

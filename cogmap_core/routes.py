@@ -81,7 +81,7 @@ from scipy.spatial import cKDTree
 from cogmap_core.config import MapParams
 from cogmap_core.errors import CogmapError, ParameterError
 from cogmap_core.evaluation import _sample_polyline_pieces, _within_radius_of_segments
-from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.map_graph import MapSnapshot, nearest_vertex
 from cogmap_core.posegraph import PoseGraph
 
 if TYPE_CHECKING:
@@ -325,8 +325,10 @@ class RouteMap:
             raise NoRouteError("the map has no vertex yet: there is nothing to route on")
         if self._tree is None:
             self._tree = cKDTree(self.poses[:, :2])
-        distance, row = self._tree.query(xy[:2])
-        return int(self.vertex_ids[int(row)]), float(distance)
+        found = nearest_vertex(self.poses, xy[:2], self._tree)  # many snaps: the tree's
+        assert found is not None  # (the map has vertices)
+        row, distance = found
+        return int(self.vertex_ids[row]), distance
 
     def route(self, start: Place, goal: Place) -> Route:
         """The shortest route from place ``start`` to place ``goal`` (each snapped to a vertex).

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from app.cli import main
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
@@ -18,7 +19,7 @@ from cogmap_core.event_file import load_event_file
 from cogmap_core.event_log import EventLog
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry
 from cogmap_core.g2o import write_g2o
-from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.map_graph import MapSnapshot, nearest_vertex
 from cogmap_core.posegraph import PoseGraph
 from cogmap_core.routes import (
     TRUE_PATH_JOIN_RADIUS,
@@ -150,6 +151,17 @@ def test_snapping_to_the_nearest_vertex():
     for bad in [(math.nan, 0.0), (1.0,), (0.0, math.inf)]:
         with pytest.raises(ParameterError, match="two finite numbers"):
             routes.snap(bad)
+
+
+def test_the_one_nearest_vertex_rule():
+    """nearest_vertex: the row nearest in x, y and its distance, the first on a tie."""
+    poses = np.array([[1.0, 0.0, 0.3], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 2.0]])
+    assert nearest_vertex(poses, (0.9, 0.2)) == (0, pytest.approx(math.hypot(0.1, 0.2)))
+    assert nearest_vertex(poses, np.array([0.0, 0.0])) == (0, 1.0)  # four at 1 m: the first
+    assert nearest_vertex(poses, (0.1, 1.0, 5.0)) == (1, pytest.approx(0.1))  # two alike: first
+    assert nearest_vertex(np.zeros((0, 3)), (0.0, 0.0)) is None
+    tree = cKDTree(poses[:, :2])  # the route map's many snaps: the same vertex
+    assert nearest_vertex(poses, (-0.8, 0.1), tree) == (2, pytest.approx(math.hypot(0.2, 0.1)))
 
 
 def test_disconnected_pieces_give_no_route():

@@ -8,8 +8,6 @@ the false loop closures in the scene) and the views follow.
 
 from __future__ import annotations
 
-import threading
-import traceback
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING, Any
@@ -25,6 +23,7 @@ from app.server.figures import (
     judge_links,
 )
 from app.server.timing import RateLimit
+from app.server.worker import Worker
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.slam import ALL_MODES
 
@@ -32,7 +31,7 @@ if TYPE_CHECKING:
     from app.server.replay import Replay
 
 
-class FiguresWorker:
+class FiguresWorker(Worker[list[MapMode]]):
     """Computes the figures of the maps of ``current()``'s replay (module doc).
 
     Args:
@@ -52,6 +51,7 @@ class FiguresWorker:
         refresh: Callable[[], None],
     ) -> None:
         """Start the worker's thread (it waits for requests)."""
+        super().__init__()
         self._current = current
         self._scene_lock = scene_lock
         self._show = show
@@ -64,11 +64,8 @@ class FiguresWorker:
         self.version = 0
         self.links: LinkJudgement = NO_LINKS  # the log's links and the truth's verdicts
         self.false_key: tuple[int, int] | None = None
-        self._cond = threading.Condition()
         self._todo: set[MapMode] = set()
-        self._stop = False
-        self._busy = False
-        threading.Thread(target=self._loop, name="cogmap-figures", daemon=True).start()
+        self._start("cogmap-figures")
 
     def get(self, mode: MapMode) -> MapFigures | None:
         """The latest figures of map ``mode`` (None before any)."""
@@ -93,34 +90,17 @@ class FiguresWorker:
         self.false_key = None
         self.links = NO_LINKS
 
-    def idle(self) -> bool:
-        """Whether nothing is asked for or being computed."""
-        with self._cond:
-            return not self._todo and not self._busy
+    def _pending(self) -> bool:
+        return bool(self._todo)
 
-    def stop(self) -> None:
-        """End the worker's thread."""
-        with self._cond:
-            self._stop = True
-            self._cond.notify()
+    def _take(self) -> list[MapMode]:
+        """Every map asked for, in :data:`ALL_MODES`'s order."""
+        todo = [m for m in ALL_MODES if m in self._todo]
+        self._todo.clear()
+        return todo
 
-    def _loop(self) -> None:
-        while True:
-            with self._cond:
-                while not self._todo and not self._stop:
-                    self._cond.wait(0.5)
-                if self._stop:
-                    return
-                todo = [m for m in ALL_MODES if m in self._todo]
-                self._todo.clear()
-                self._busy = True
-            try:
-                self._compute(todo)
-            except Exception:  # a figure must never stop the page
-                traceback.print_exc()
-            finally:
-                with self._cond:
-                    self._busy = False
+    def _work_on(self, work: list[MapMode]) -> None:
+        self._compute(work)
 
     def _compute(self, modes: list[MapMode]) -> None:
         """Compute the figures of ``modes`` that changed, holding the replay lock only to copy.

@@ -31,20 +31,20 @@ from __future__ import annotations
 
 import html
 import threading
-import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from app.palette import GROUND_TRUTH_COLOR, INK, MAP_COLORS, css
+from app.server.worker import Worker
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import CogmapError
 from cogmap_core.evaluation import RigidTransform2D
-from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.map_graph import MapSnapshot, nearest_vertex
 from cogmap_core.routes import NoRouteError, Route, RouteMap, true_path_graph
 
 FloatArray = NDArray[np.float64]
@@ -312,22 +312,20 @@ def plan_html(plan: RoutePlan, shown: MapMode) -> str:
 T = TypeVar("T")
 
 
-class RouteWorker(Generic[T]):
+class RouteWorker(Worker[T]):
     """One thread that computes routes: callbacks only flag who needs one (latest wins).
 
     ``work(item)`` runs on the thread for each item flagged; an item flagged again while its
-    work runs is done once more afterwards. An exception is printed and never stops the thread.
+    work runs is done once more afterwards. An exception is printed and never stops the thread
+    (:class:`~app.server.worker.Worker`).
     """
 
     def __init__(self, work: Callable[[T], None], name: str = "cogmap-routes") -> None:
         """Start the thread."""
+        super().__init__()
         self._work = work
-        self._cond = threading.Condition()
         self._todo: dict[int, T] = {}
-        self._busy = False
-        self._stop = False
-        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-        self._thread.start()
+        self._start(name)
 
     def request(self, item: T) -> None:
         """Flag ``item`` for work."""
@@ -335,33 +333,16 @@ class RouteWorker(Generic[T]):
             self._todo[id(item)] = item
             self._cond.notify()
 
-    def idle(self) -> bool:
-        """Whether nothing is flagged or under way."""
-        with self._cond:
-            return not self._todo and not self._busy
+    def _pending(self) -> bool:
+        return bool(self._todo)
 
-    def stop(self) -> None:
-        """Stop the thread after the work under way."""
-        with self._cond:
-            self._stop = True
-            self._cond.notify()
+    def _take(self) -> T:
+        """One item flagged (the one flagged last; each flags once until taken)."""
+        _, item = self._todo.popitem()
+        return item
 
-    def _loop(self) -> None:
-        while True:
-            with self._cond:
-                while not self._todo and not self._stop:
-                    self._cond.wait(0.5)
-                if self._stop:
-                    return
-                _, item = self._todo.popitem()
-                self._busy = True
-            try:
-                self._work(item)
-            except Exception:  # a route must never stop the page
-                traceback.print_exc()
-            finally:
-                with self._cond:
-                    self._busy = False
+    def _work_on(self, work: T) -> None:
+        self._work(work)
 
 
 def route_inputs(
@@ -413,11 +394,11 @@ def nearest_map(
     """
     best: tuple[float, Place] | None = None
     for mode, offset in offsets.items():
-        snap = snapshots[mode]
         local = (float(point[0]) - offset, float(point[1]))
-        if snap.poses.shape[0] == 0:
+        found = nearest_vertex(snapshots[mode].poses, local)
+        if found is None:
             continue
-        d = float(np.min(np.hypot(snap.poses[:, 0] - local[0], snap.poses[:, 1] - local[1])))
+        d = found[1]
         if best is None or d < best[0]:
             best = (d, Place(mode, local))
     return None if best is None else best[1]

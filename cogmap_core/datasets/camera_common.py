@@ -23,7 +23,6 @@ import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,6 +31,7 @@ from cogmap_core.errors import InputFileError, ParameterError
 from cogmap_core.frames import Frame
 from cogmap_core.frontend.config import FrontEndConfig
 from cogmap_core.frontend.visual_odometry import with_visual_odometry
+from cogmap_core.input_reader import InputReader
 
 CAMERA_ONLY_MAP_CHANGES: dict[str, float] = {
     # Visual odometry drifts far more than wheel odometry (1.5 m of dead-reckoning ATE on the
@@ -191,7 +191,7 @@ def frame_times(
     return np.arange(count) / rate, "--fps" if fps is not None else "the video"
 
 
-class CameraReader:
+class CameraReader(InputReader):
     """Base of the camera-only readers: frames with visual odometry and ground truth.
 
     Subclasses set :attr:`info` and implement :meth:`_images` (the decoded images in order, grey
@@ -285,20 +285,6 @@ class CameraReader:
             raise InputFileError(
                 f"{self.path}: none of its frames could be decoded; nothing to map"
             )
-
-    def close(self) -> None:
-        """Release the input (idempotent)."""
-
-    def __enter__(self) -> CameraReader:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 def companion(path: Path, name: str) -> Path:

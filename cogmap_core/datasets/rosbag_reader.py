@@ -64,7 +64,6 @@ from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import cv2
@@ -95,6 +94,7 @@ from cogmap_core.frames import Frame
 from cogmap_core.frontend.config import FrontEndConfig
 from cogmap_core.frontend.local_view import averages_colour
 from cogmap_core.frontend.visual_odometry import with_visual_odometry
+from cogmap_core.input_reader import InputReader
 
 log = logging.getLogger(__name__)
 
@@ -162,7 +162,7 @@ class BagInfo:
         return self.frame_count / self.duration if self.duration > 0 else 0.0
 
 
-class BagReader:
+class BagReader(InputReader):
     """An open bag with the iRat topics; iterate :meth:`frames` (one pass at a time)."""
 
     def __init__(
@@ -635,17 +635,6 @@ class BagReader:
                 pass
             self._reader = None
         self._cleanup_tmp()
-
-    def __enter__(self) -> BagReader:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def __del__(self) -> None:
         self._cleanup_tmp()

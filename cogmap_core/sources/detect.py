@@ -147,7 +147,8 @@ class CameraOptions:
 
 Source = BagReader | LogReader | CameraReader
 """A reader of any kind: ``info`` (``duration``, ``frame_count``), ``frames(start_time)``,
-``counters``, ``warnings`` and ``close()`` (a context manager)."""
+``counters``, ``warnings`` and ``close()`` (a context manager:
+:class:`~cogmap_core.input_reader.InputReader`)."""
 
 
 def detect_format(path: str | Path) -> str:

@@ -13,7 +13,6 @@ import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -26,6 +25,7 @@ from cogmap_core.evaluation import (
 )
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.frames import EventStep
+from cogmap_core.input_reader import InputReader
 from cogmap_core.sources.log_text import Rows
 from cogmap_core.sources.odometry_log import (
     LOG_EVALUATION,
@@ -260,7 +260,7 @@ class LogCounters:
     warnings: list[str] = field(default_factory=list)
 
 
-class LogReader:
+class LogReader(InputReader):
     """Serves a log's steps the way :class:`~cogmap_core.datasets.BagReader` serves frames.
 
     There is no camera: :attr:`has_camera` is False and the steps are
@@ -338,17 +338,3 @@ class LogReader:
             "duplicates": stats.duplicates,
             "links": stats.links,
         }
-
-    def close(self) -> None:
-        """Nothing to release (the log is in memory); for symmetry with the bag reader."""
-
-    def __enter__(self) -> LogReader:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

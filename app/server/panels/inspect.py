@@ -20,7 +20,7 @@ from app.server.panels import swatch
 from app.server.scene_style import edge_error
 from app.server.validation import GuiGate, click
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
-from cogmap_core.map_graph import MapSnapshot
+from cogmap_core.map_graph import MapSnapshot, nearest_vertex
 
 #: What the panel says while nothing is selected.
 INSPECT_HELP = (
@@ -130,10 +130,10 @@ def nearest_pick(
     edge between two vertices the edge. Ties go to the vertex.
     """
     snap = cmap.snapshot()
-    if snap.vertex_ids.shape[0] == 0:
+    nearest = nearest_vertex(snap.poses, point)
+    if nearest is None:
         return None
-    d = np.hypot(snap.poses[:, 0] - point[0], snap.poses[:, 1] - point[1])
-    k = int(np.argmin(d))
+    k, d_k = nearest
     gap_e, e = math.inf, -1
     if snap.edge_from.shape[0]:
         first, second = snap.edge_ends()
@@ -148,7 +148,7 @@ def nearest_pick(
         e = int(np.argmin(gap))
         gap_e = float(gap[e])
     name = mode.value.replace("_", " ")
-    if gap_e <= tolerance and gap_e < d[k]:
+    if gap_e <= tolerance and gap_e < d_k:
         seg = np.array([a[e], b[e]])
         loop = snap.edge_kind[e] == EdgeKind.LOOP_CLOSURE
         false = (float(snap.edge_time[e]), int(snap.edge_to[e])) in false_edges
@@ -157,8 +157,8 @@ def nearest_pick(
         )
         html_ = describe_edge(cmap, snap, e, false_edges)
         return gap_e, Pick(mode, "edge", e, html_, seg, summary)
-    if d[k] <= tolerance:
+    if d_k <= tolerance:
         seg = np.array([snap.poses[k, :2], snap.poses[k, :2]])
         summary = f"{name}: vertex {int(snap.vertex_ids[k])} ({snap.vertex_time[k]:.1f} s)"
-        return float(d[k]), Pick(mode, "vertex", k, describe_vertex(cmap, snap, k), seg, summary)
+        return d_k, Pick(mode, "vertex", k, describe_vertex(cmap, snap, k), seg, summary)
     return None
