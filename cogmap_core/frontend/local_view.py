@@ -60,14 +60,14 @@ compared.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from cogmap_core.errors import InputFileError
+from cogmap_core.errors import InputFileError, StateError
 from cogmap_core.frontend.compiled import kernels
 from cogmap_core.frontend.config import FrontEndConfig
 from cogmap_core.frontend.resampling import AreaPlan, BlockPlan
@@ -254,6 +254,45 @@ class LocalViewCells:
         if not 0 <= template_id < self._count:
             raise IndexError(f"no template {template_id}; there are {self._count}")
         return self._templates[template_id].astype(np.int32 if self._blocks else np.uint8)
+
+    def state_dict(self) -> dict[str, Any]:
+        """The stored templates and what the index holds, as plain data; see :meth:`load_state`.
+
+        ``templates`` (``(T, Y, X)`` as :meth:`template` returns them; ``uint8`` when there are
+        none), the index's ``indexed`` templates and ``key_signs`` (derived from the templates,
+        kept to check them), and the ``last_match`` (a dict, or None).
+        """
+        templates = (
+            np.stack([self.template(k) for k in range(self._count)])
+            if self._count
+            else np.zeros((0, self._y, self._x), dtype=np.uint8)
+        )
+        match = self.last_match
+        return {
+            "templates": templates,
+            "key_signs": self._signs.copy(),
+            "indexed": self._indexed,
+            "last_match": None if match is None else asdict(match),
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Store the templates of :meth:`state_dict` in an empty store, and its last match.
+
+        The same adds rebuild the same index, at the same counts.
+
+        Raises:
+            StateError: the store is not empty, or the templates do not rebuild the index
+                described.
+
+        """
+        if self._count:
+            raise StateError("templates can only be loaded into an empty template store")
+        for template in state["templates"]:
+            self.add(template)
+        if self._indexed != state["indexed"] or not np.array_equal(self._signs, state["key_signs"]):
+            raise StateError("the view templates do not rebuild the saved index")
+        match = state["last_match"]
+        self.last_match = None if match is None else MatchResult(**match)
 
     def make_template(self, image: NDArray[np.uint8]) -> NDArray[Any]:
         """Turn a camera image into a template (as :meth:`template` returns them).
