@@ -12,6 +12,7 @@ further edge can join it: at the first event with ``t - t_prev >= T_interval`` o
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -106,6 +107,39 @@ class LoopClosureClusterer:
             cluster.closed_time = time
             self._open = None
         return cluster
+
+    def state_dict(self) -> dict[str, Any]:
+        """The clusters as plain data, what :meth:`load_state` restores.
+
+        ``clusters``: per cluster (in id order) its ``start_time``, ``last_time``,
+        ``edge_count`` and ``closed_time`` (None while open); ``open``: whether the newest one
+        is still open. ``t_interval`` and ``t_total`` are settings (the map's parameters), not
+        state.
+
+        Raises:
+            ValueError: the open cluster is not the newest one (it always is).
+
+        """
+        if self._open is not None and (not self.clusters or self.clusters[-1] is not self._open):
+            raise ValueError("the open cluster is not the newest one; cannot save the clusterer")
+        clusters = [
+            {
+                "start_time": c.start_time,
+                "last_time": c.last_time,
+                "edge_count": c.edge_count,
+                "closed_time": c.closed_time,
+            }
+            for c in self.clusters
+        ]
+        return {"clusters": clusters, "open": self._open is not None}
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Hold the clusters :meth:`state_dict` described (the thresholds stay as they are)."""
+        self.clusters = [
+            Cluster(k, c["start_time"], c["last_time"], c["edge_count"], c["closed_time"])
+            for k, c in enumerate(state["clusters"])
+        ]
+        self._open = self.clusters[-1] if state["open"] else None
 
 
 def cluster_schedule(

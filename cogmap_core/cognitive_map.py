@@ -39,14 +39,15 @@ from __future__ import annotations
 
 import math
 import time as wallclock
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.clustering import Cluster, LoopClosureClusterer, joins
 from cogmap_core.config import MapParams
-from cogmap_core.errors import EventError
+from cogmap_core.errors import EventError, StateError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.geometry import TWO_PI, compose, compose_scalar, inverse_scalar, wrap_scalar
 from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot
@@ -93,6 +94,15 @@ class OptimizationRecord:
     wall_s: float
     integrated: int
     short_edges_removed: int
+
+    def state_dict(self) -> dict[str, Any]:
+        """The record as plain data (every attribute)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> OptimizationRecord:
+        """The record :meth:`state_dict` described."""
+        return cls(**state)
 
 
 @dataclass(slots=True)
@@ -448,6 +458,104 @@ class CognitiveMap:
     # ----------------------------------------------------------------------------------------
     # state
     # ----------------------------------------------------------------------------------------
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything that decides what the map does next, as plain data (copies).
+
+        ``mode`` and ``params`` (:meth:`MapParams.to_dict`), the parts' own state (``graph``,
+        ``clusterer``, ``integration``, ``gate``: their ``state_dict()``), the records
+        (``optimizations``, ``refused``: lists of their ``state_dict()``), ``counters``, the
+        robot's state (``robot``: ``current`` vertex, ``accum``-ulated motion in its frame,
+        distance ``travelled`` since, ``last_rotation``, ``last_time``, ``last_link`` as
+        ``[time, target, accepted]`` or None), when it last optimised, and its ``size_history``
+        (``time``, ``vertices``, ``edges`` arrays). :meth:`from_state` builds the map again.
+        """
+        times, vertices, edges = self.size_history()
+        link = self._last_link
+        return {
+            "mode": self.mode.value,
+            "params": self.params.to_dict(),
+            "graph": self.graph.state_dict(),
+            "clusterer": self.clusterer.state_dict(),
+            "integration": self.integration.state_dict(),
+            "gate": self.gate.state_dict(),
+            "optimizations": [r.state_dict() for r in self.optimizations],
+            "refused": [c.state_dict() for c in self.refused],
+            "counters": asdict(self.counters),
+            "robot": {
+                "current": self._current,
+                "accum": list(self._accum),
+                "travelled": self._travelled,
+                "last_rotation": self._last_rotation,
+                "last_time": self._last_time,
+                "last_link": None if link is None else list(link),
+            },
+            "edges_at_last_optimization": self._edges_at_last_optimization,
+            "optimized_once": self._optimized_once,
+            "size_history": {"time": times, "vertices": vertices, "edges": edges},
+        }
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> CognitiveMap:
+        """The map :meth:`state_dict` described.
+
+        Raises:
+            StateError: parts that do not fit together (:meth:`load_state`).
+
+        """
+        cmap = cls(MapMode(state["mode"]), MapParams.from_dict(state["params"]))
+        cmap.load_state(state)
+        return cmap
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Become the map :meth:`state_dict` described (a map of the same mode).
+
+        Raises:
+            StateError: another mode, or parts that do not fit together: the graph's
+                (:meth:`MapGraph.load_state`), or counters that do not add up with the graph
+                (they are shown as they were saved, never derived).
+
+        """
+        if MapMode(state["mode"]) is not self.mode:
+            raise StateError(f"a {state['mode']} map's state cannot make a {self.mode} map")
+        self.set_params(MapParams.from_dict(state["params"]))
+        self.graph.load_state(state["graph"])
+        self.clusterer.load_state(state["clusterer"])
+        self.integration.load_state(state["integration"])
+        self.gate.load_state(state["gate"])
+        self.optimizations = [OptimizationRecord.from_state(r) for r in state["optimizations"]]
+        self.refused = [RelocalisationCheck.from_state(c) for c in state["refused"]]
+        self.counters = MapCounters(**state["counters"])
+        self._check_counters()
+        robot = state["robot"]
+        self._current = int(robot["current"])
+        self._accum = [float(v) for v in robot["accum"]]
+        self._travelled = float(robot["travelled"])
+        self._last_rotation = float(robot["last_rotation"])
+        self._last_time = float(robot["last_time"])
+        link = robot["last_link"]
+        self._last_link = None if link is None else (float(link[0]), int(link[1]), bool(link[2]))
+        self._edges_at_last_optimization = int(state["edges_at_last_optimization"])
+        self._optimized_once = bool(state["optimized_once"])
+        history = state["size_history"]
+        self._hist_time = np.asarray(history["time"]).tolist()
+        self._hist_vertices = np.asarray(history["vertices"]).tolist()
+        self._hist_edges = np.asarray(history["edges"]).tolist()
+
+    def _check_counters(self) -> None:
+        """Refuse counters that do not add up with the graph (:meth:`load_state`).
+
+        Every proposal made an id; every id that is not a live vertex was declined, integrated or
+        removed as a short edge; every refused relocalisation is on record.
+        """
+        counters, graph = self.counters, self.graph
+        removed = counters.declined + counters.integrated + counters.short_edges
+        if (
+            counters.proposed != graph.num_ids
+            or removed != graph.num_ids - graph.num_vertices
+            or counters.refused_relocalisations != len(self.refused)
+        ):
+            raise StateError("counters do not match the graph")
 
     def _set_current(self, vid: int, offset: tuple[float, float, float] | list[float]) -> None:
         self._current = vid

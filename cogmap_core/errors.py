@@ -39,3 +39,11 @@ class OutputError(CogmapError):
     Raised before any work when the target is found unwritable, or when writing fails; either way
     the previous output (if any) is left intact.
     """
+
+
+class StateError(ValueError):
+    """Saved state does not fit the object it is loaded into (``load_state``, ``from_state``).
+
+    The message names the part that does not fit (``"adjacency does not match the graph"``);
+    a file format reading the state prefixes it with where the part came from.
+    """

@@ -497,6 +497,37 @@ class EventLog:
             return known, score_loop_closures(robot, target_truth, None, distance)
         return known, score_loop_closures(robot, target_truth, relative, distance, heading)
 
+    def state_dict(self) -> dict[str, NDArray[Any]]:
+        """The log as arrays (copies), what :meth:`from_state` restores.
+
+        The per-event columns (:meth:`columns`: ``kind``, ``time``, ``ref``, ``view``,
+        ``value0``, ``value1``, ``score``) and, per frame, ``frame_end``, ``frame_time``,
+        ``has_truth`` and ``truth`` (``(F, 3)``, zeros where a frame has none).
+        """
+        state = {name: np.array(column) for name, column in self.columns().items()}
+        state["frame_end"] = np.array(self.frame_end)
+        state["frame_time"] = np.array(self.frame_time)
+        state["has_truth"] = np.array(self.has_truth)
+        truth = np.zeros((self._n_frames, 3))
+        truth[self.has_truth] = self.ground_truth
+        state["truth"] = truth
+        return state
+
+    @classmethod
+    def from_state(cls, state: Mapping[str, NDArray[Any]]) -> EventLog:
+        """The log :meth:`state_dict` described; without ``score``, no link has a score.
+
+        Raises:
+            ValueError: the frame ends do not match the events (:meth:`from_columns`).
+
+        """
+        columns = {name: state[name] for name in _EVENT_COLUMNS}
+        if "score" in state:
+            columns["score"] = state["score"]
+        return cls.from_columns(
+            columns, state["frame_end"], state["frame_time"], state["truth"], state["has_truth"]
+        )
+
     def recording(self, source: str = "", frontend: dict[str, Any] | None = None) -> EventRecording:
         """The log as an :class:`~cogmap_core.event_file.EventRecording` (to save or replay)."""
         return EventRecording(

@@ -19,13 +19,13 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.edge_noise import edge_information
-from cogmap_core.errors import EventError
+from cogmap_core.errors import EventError, StateError
 from cogmap_core.geometry import (
     compose,
     compose_scalar,
@@ -101,6 +101,16 @@ def _edge_rows(
     return rows[:m], rows[m:]
 
 
+#: The graph's per-vertex arrays (one row per vertex id) and per-edge arrays (one per edge index).
+VERTEX_ARRAYS = ("pose", "vertex_time", "view", "alive", "alias", "alias_offset")
+EDGE_ARRAYS = (
+    "edge_from", "edge_to", "edge_rel", "edge_time", "edge_kind", "edge_cluster", "edge_alive",
+)  # fmt: skip
+#: What a new graph's arrays hold past the rows in use.
+_FILL = {"alias": -1, "edge_cluster": -1}
+_INITIAL_CAPACITY = 256
+
+
 def nearest_vertex(
     poses: FloatArray, point: Sequence[float] | FloatArray, tree: cKDTree | None = None
 ) -> tuple[int, float] | None:
@@ -137,7 +147,7 @@ class MapGraph:
 
     def __init__(self) -> None:
         """An empty graph."""
-        cap = 256
+        cap = _INITIAL_CAPACITY
         self.pose = np.zeros((cap, 3))
         self.vertex_time = np.zeros(cap)
         self.view = np.zeros(cap, dtype=np.int64)
@@ -306,6 +316,56 @@ class MapGraph:
         self._absorbed[kept].extend(moved)
         self.alive[removed] = False
         self.num_vertices -= 1
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict[str, Any]:
+        """The graph as plain data (copies), what :meth:`load_state` restores.
+
+        The rows in use of every array (:data:`VERTEX_ARRAYS`: ``num_ids`` rows,
+        :data:`EDGE_ARRAYS`: ``num_edges_total``), ``adjacency`` (per vertex id, neighbour ->
+        edge index, in the dict's own order: merges and short-edge removal iterate it),
+        ``absorbed`` (per vertex id, the ids whose alias it is besides itself) and the counts.
+        """
+        n, m = self.num_ids, self.num_edges_total
+        state: dict[str, Any] = {name: getattr(self, name)[:n].copy() for name in VERTEX_ARRAYS}
+        state.update({name: getattr(self, name)[:m].copy() for name in EDGE_ARRAYS})
+        state["adjacency"] = [dict(a) for a in self.adjacency]
+        state["absorbed"] = [list(a) for a in self._absorbed]
+        state["num_ids"], state["num_edges_total"] = n, m
+        state["num_vertices"] = self.num_vertices
+        state["num_edges"] = self.num_edges
+        state["num_loop_edges"] = self.num_loop_edges
+        return state
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Become the graph :meth:`state_dict` described (its arrays grown as a new graph's).
+
+        Raises:
+            StateError: parts that do not fit together (an array or the adjacency of another
+                size than the counts, live vertices other than ``num_vertices``).
+
+        """
+        n, m = int(state["num_ids"]), int(state["num_edges_total"])
+        for name in (*VERTEX_ARRAYS, *EDGE_ARRAYS):
+            like = getattr(self, name)  # dtype and row shape
+            rows = n if name in VERTEX_ARRAYS else m
+            saved = np.asarray(state[name])
+            if saved.shape != (rows, *like.shape[1:]):
+                raise StateError(f"graph.{name} does not match the graph")
+            saved = saved.astype(like.dtype, copy=False)
+            setattr(self, name, grow_array(saved, max(_INITIAL_CAPACITY, rows), _FILL.get(name, 0)))
+        self.num_ids, self.num_edges_total = n, m
+        self.num_vertices = int(state["num_vertices"])
+        self.num_edges = int(state["num_edges"])
+        self.num_loop_edges = int(state["num_loop_edges"])
+        if len(state["adjacency"]) != n:
+            raise StateError("adjacency does not match the graph")
+        self.adjacency = [dict(a) for a in state["adjacency"]]
+        if len(state["absorbed"]) != n:
+            raise StateError("aliases do not match the graph")
+        self._absorbed = [list(a) for a in state["absorbed"]]
+        if int(np.count_nonzero(self.alive[:n])) != self.num_vertices:
+            raise StateError("graph's live vertices do not match its header")
 
     # ------------------------------------------------------------------ queries
     def graph_distance_below(self, source: int, target: int, limit: float) -> bool:

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from cogmap_core.config import MapParams
 from cogmap_core.geometry import compose_scalar, inverse_scalar, wrap_scalar
@@ -77,6 +78,25 @@ class RelocalisationCheck:
     heading_error: float
     correction: tuple[float, float, float] = (0.0, 0.0, 0.0)
     by_consensus: bool = False
+
+    def state_dict(self) -> dict[str, Any]:
+        """The outcome as plain data (every attribute; ``correction`` as a list)."""
+        return {
+            "time": self.time,
+            "target": self.target,
+            "accepted": self.accepted,
+            "position_error": self.position_error,
+            "heading_error": self.heading_error,
+            "correction": list(self.correction),
+            "by_consensus": self.by_consensus,
+        }
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> RelocalisationCheck:
+        """The outcome :meth:`state_dict` described."""
+        values = dict(state)
+        values["correction"] = tuple(float(v) for v in state["correction"])
+        return cls(**values)
 
 
 @dataclass(frozen=True, slots=True)
@@ -146,6 +166,24 @@ class RelocalisationGate:
         """No refusal yet."""
         self.streak: list[RelocalisationCheck] = []
         self.accepted_by_consensus: list[RelocalisationCheck] = []
+
+    def state_dict(self) -> dict[str, Any]:
+        """The gate's memory as plain data, what :meth:`load_state` restores.
+
+        ``streak`` (the refusals in a row) and ``accepted_by_consensus``, as lists of
+        :meth:`RelocalisationCheck.state_dict` records.
+        """
+        return {
+            "streak": [c.state_dict() for c in self.streak],
+            "accepted_by_consensus": [c.state_dict() for c in self.accepted_by_consensus],
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Hold the streak and the acceptances :meth:`state_dict` described."""
+        self.streak = [RelocalisationCheck.from_state(c) for c in state["streak"]]
+        self.accepted_by_consensus = [
+            RelocalisationCheck.from_state(c) for c in state["accepted_by_consensus"]
+        ]
 
     def check(
         self,

@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -91,6 +92,31 @@ class RevisitRun:
     closing: tuple[float, float, float] = (0.0, 0.0, 0.0)
     closed: float = math.nan
 
+    def state_dict(self) -> dict[str, Any]:
+        """The run as plain data (every attribute; ``vertices`` and ``closing`` as lists)."""
+        return {
+            "start": self.start,
+            "opened_from": self.opened_from,
+            "vertices": list(self.vertices),
+            "created": self.created,
+            "end": self.end,
+            "closing": list(self.closing),
+            "closed": self.closed,
+        }
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> RevisitRun:
+        """The run :meth:`state_dict` described."""
+        return cls(
+            start=int(state["start"]),
+            opened_from=int(state["opened_from"]),
+            vertices=[int(v) for v in state["vertices"]],
+            created=float(state["created"]),
+            end=int(state["end"]),
+            closing=tuple(float(v) for v in state["closing"]),  # type: ignore[arg-type]
+            closed=float(state["closed"]),
+        )
+
 
 class KnownEdges:
     """Spatial index of the map's live edges, as they were when it was built.
@@ -124,6 +150,29 @@ class KnownEdges:
         longest = float(np.max(np.hypot(*(self.end - self.start).T))) if owner.size else 0.0
         self.reach = radius + 0.5 * longest
         self.radius = radius
+
+    def state_dict(self) -> dict[str, Any]:
+        """The index as plain data, what :meth:`from_state` restores.
+
+        Its pieces' arrays (copies), ``reach``, ``radius``, and whether it has a tree (the same
+        midpoints build the same tree again).
+        """
+        state: dict[str, Any] = {
+            name: getattr(self, name).copy() for name in ("start", "end", "ends", "newest")
+        }
+        state.update(reach=self.reach, radius=self.radius, tree=self.tree is not None)
+        return state
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> KnownEdges:
+        """The index :meth:`state_dict` described, as it was when it was built."""
+        known = cls.__new__(cls)
+        for name in ("start", "end", "ends", "newest"):
+            setattr(known, name, state[name])
+        known.reach = float(state["reach"])
+        known.radius = float(state["radius"])
+        known.tree = cKDTree(0.5 * (known.start + known.end)) if state["tree"] else None
+        return known
 
     def nearest(self, point: np.ndarray, known_before: float) -> tuple[int, int] | None:
         """The closest edge of ground known before ``known_before`` within the radius of ``point``.
@@ -160,6 +209,30 @@ class SceneIntegration:
         # (robot's vertex, vertex id it was re-localised on) of the latest relocalisation on
         # known ground, until the next vertex is added
         self._relocalised_at: tuple[int, int] | None = None
+
+    def state_dict(self) -> dict[str, Any]:
+        """The runs and the index as plain data, what :meth:`load_state` restores.
+
+        ``open`` and ``pending`` runs (:meth:`RevisitRun.state_dict`), ``relocalised_at`` (the
+        latest relocalisation on known ground, ``[robot's vertex, vertex]``) and ``known_edges``
+        (:meth:`KnownEdges.state_dict`); None where there is none.
+        """
+        at, known = self._relocalised_at, self._known
+        return {
+            "open": None if self.open is None else self.open.state_dict(),
+            "pending": [run.state_dict() for run in self.pending],
+            "relocalised_at": None if at is None else list(at),
+            "known_edges": None if known is None else known.state_dict(),
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Hold the runs and the index :meth:`state_dict` described."""
+        self.open = None if state["open"] is None else RevisitRun.from_state(state["open"])
+        self.pending = [RevisitRun.from_state(run) for run in state["pending"]]
+        at = state["relocalised_at"]
+        self._relocalised_at = None if at is None else (int(at[0]), int(at[1]))
+        known = state["known_edges"]
+        self._known = None if known is None else KnownEdges.from_state(known)
 
     def on_vertex(self, vertex: int, parent: int, time: float) -> None:
         """A vertex was added, joined by a sequential edge to ``parent``."""

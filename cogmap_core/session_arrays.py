@@ -1,8 +1,8 @@
 """The array packing a session file uses (:mod:`cogmap_core.session_file`), and its error.
 
 A session file is a header of JSON (:data:`Json`) and named arrays (:data:`Arrays`); flat
-dataclass records are kept as one array per field, lists of integer lists as their counts and
-items.
+records (a dataclass's ``state_dict()``: one value per field) are kept as one array per field,
+lists of integer lists as their counts and items.
 """
 
 from __future__ import annotations
@@ -23,10 +23,13 @@ class SessionError(InputFileError):
     """A session file cannot be used: unreadable, corrupt, another version, other settings."""
 
 
-def save_records(arrays: Arrays, prefix: str, records: list[Any], kind: type) -> None:
-    """A list of flat dataclass records as one array per field (tuples as ``(n, k)``)."""
+def save_records(arrays: Arrays, prefix: str, records: list[Json], kind: type) -> None:
+    """Flat records (dicts of ``kind``'s fields) as one array per field.
+
+    The fields' types give the arrays' types; ``correction`` (three floats) is ``(n, 3)``.
+    """
     for f in fields(kind):
-        values = [getattr(r, f.name) for r in records]
+        values = [r[f.name] for r in records]
         if f.name == "correction":
             arrays[prefix + f.name] = np.array(values, dtype=np.float64).reshape(-1, 3)
         elif f.type in ("int", "bool"):
@@ -44,15 +47,13 @@ def save_lists(arrays: Arrays, prefix: str, lists: list[list[int]]) -> None:
     )
 
 
-def load_records(arrays: Arrays, prefix: str, kind: type) -> list[Any]:
-    """The records :func:`save_records` saved under ``prefix``."""
+def load_records(arrays: Arrays, prefix: str, kind: type) -> list[Json]:
+    """The records :func:`save_records` saved under ``prefix`` (dicts of ``kind``'s fields)."""
     columns = {f.name: arrays[prefix + f.name].tolist() for f in fields(kind)}
     count = len(next(iter(columns.values())))
     if any(len(v) != count for v in columns.values()):
         raise SessionError(f"{prefix[:-1]} records have columns of different lengths")
-    if "correction" in columns:
-        columns["correction"] = [tuple(c) for c in columns["correction"]]
-    return [kind(**{name: values[k] for name, values in columns.items()}) for k in range(count)]
+    return [{name: values[k] for name, values in columns.items()} for k in range(count)]
 
 
 def load_lists(arrays: Arrays, prefix: str) -> list[list[int]]:

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -43,13 +43,11 @@ from numpy.typing import NDArray
 from cogmap_core import __version__
 from cogmap_core.cognitive_map import MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.errors import ParameterError
+from cogmap_core.errors import ParameterError, StateError
 from cogmap_core.event_log import EventLog
 from cogmap_core.fileio import atomic_writer, load_archive
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
 from cogmap_core.frontend.config import COGMAP_ARITHMETIC
-from cogmap_core.frontend.local_view import MatchResult, ViewMatch
-from cogmap_core.frontend.pose_cells import _ViewCell
 from cogmap_core.session_arrays import Arrays, Json, SessionError, load_lists, save_lists
 from cogmap_core.session_map import load_map, save_map
 from cogmap_core.slam import SlamSession
@@ -59,6 +57,17 @@ FORMAT_VERSION = 1
 
 RESUME_GAP_S = 1.0
 """A bag whose clock does not continue the session's starts this long (s) after its end."""
+
+#: The pose cells' scalars in ``state["frontend"]`` (:meth:`PoseCellExperiences.state_dict`).
+_POSE_CELL_SCALARS = (
+    "current_vt", "prev_vt", "current_exp", "vt_delta_th", "frame", "odo_update", "vt_update",
+)  # fmt: skip
+#: The event log's members (``log.NAME``, :meth:`EventLog.state_dict`), in the file's order;
+#: ``score`` is absent from files written before it existed.
+_LOG_ARRAYS = (
+    "kind", "time", "ref", "view", "value0", "value1", "score",
+    "frame_end", "frame_time", "has_truth", "truth",
+)  # fmt: skip
 
 
 @dataclass
@@ -134,53 +143,31 @@ def _collect(session: SlamSession) -> tuple[Json, Arrays]:
 
 
 def _save_frontend(frontend: FrontEnd, state: Json, arrays: Arrays) -> None:
-    lv = frontend.local_view
-    pc = frontend.pose_cells
-    net = pc.network
-    last = frontend.last_view
-    match = lv.last_match
+    fe = frontend.state_dict()
+    lv, pc = fe["local_view"], fe["pose_cells"]
     state["frontend"] = {
-        "frames": frontend.frames,
-        "last_time": frontend._last_time,
-        "last_view": None if last is None else asdict(last),
-        "indexed": lv._indexed,
-        "last_match": None if match is None else asdict(match),
-        "best": list(net.best),
-        "current_vt": pc.current_vt,
-        "prev_vt": pc.prev_vt,
-        "current_exp": pc.current_exp,
-        "vt_delta_th": pc._vt_delta_th,
-        "frame": pc._frame,
-        "odo_update": pc._odo_update,
-        "vt_update": pc._vt_update,
+        "frames": fe["frames"],
+        "last_time": fe["last_time"],
+        "last_view": fe["last_view"],
+        "indexed": lv["indexed"],
+        "last_match": lv["last_match"],
+        "best": pc["network"]["best"],
+        **{name: pc[name] for name in _POSE_CELL_SCALARS},
     }
-    arrays["frontend.templates"] = (
-        np.stack([lv.template(k) for k in range(lv.count)])
-        if lv.count
-        else np.zeros((0, lv._y, lv._x), dtype=np.uint8)
-    )
-    arrays["frontend.key_signs"] = lv._signs.copy()
-    arrays["frontend.pose_cells"] = net.cells.copy()
-    views = pc._views
-    arrays["frontend.view_cell_pose"] = np.array([(v.x, v.y, v.th) for v in views]).reshape(-1, 3)
-    arrays["frontend.view_cell_decay"] = np.array([v.decay for v in views], dtype=np.float64)
-    arrays["frontend.view_cell_decay_frame"] = np.array(
-        [v.decay_frame for v in views], dtype=np.int64
-    )
-    save_lists(arrays, "frontend.view_cell_experiences", [v.experiences for v in views])
-    arrays["frontend.experiences"] = np.array(pc._experiences, dtype=np.float64).reshape(-1, 3)
-    arrays["frontend.experience_view"] = np.array(pc._experience_vt, dtype=np.int64)
+    arrays["frontend.templates"] = lv["templates"]
+    arrays["frontend.key_signs"] = lv["key_signs"]
+    arrays["frontend.pose_cells"] = pc["network"]["cells"]
+    for name in ("view_cell_pose", "view_cell_decay", "view_cell_decay_frame"):
+        arrays["frontend." + name] = pc[name]
+    save_lists(arrays, "frontend.view_cell_experiences", pc["view_cell_experiences"])
+    arrays["frontend.experiences"] = pc["experiences"]
+    arrays["frontend.experience_view"] = pc["experience_view"]
 
 
 def _save_log(log: EventLog, arrays: Arrays) -> None:
-    for name, column in log.columns().items():
-        arrays[f"log.{name}"] = np.array(column)
-    arrays["log.frame_end"] = np.array(log.frame_end)
-    arrays["log.frame_time"] = np.array(log.frame_time)
-    arrays["log.has_truth"] = np.array(log.has_truth)
-    truth = np.zeros((log.frames, 3))
-    truth[log.has_truth] = log.ground_truth
-    arrays["log.truth"] = truth
+    state = log.state_dict()
+    for name in _LOG_ARRAYS:
+        arrays["log." + name] = state[name]
 
 
 # ============================================================================ reading
@@ -259,7 +246,10 @@ def _restore(header: Json, arrays: Arrays) -> tuple[SlamSession, SessionMeta]:
     modes = tuple(MapMode(m) for m in header["modes"])
     session = SlamSession(params, config, modes)
     state = header["state"]
-    session.frontend = _load_frontend(config, state["frontend"], arrays)
+    try:
+        session.frontend = _load_frontend(config, state["frontend"], arrays)
+    except StateError as exc:
+        raise SessionError(str(exc)) from None
     session.log = _load_log(arrays)
     if session.log.frames != header["frames"] or session.log.event_count != header["events"]:
         raise SessionError("the event log does not match the header")
@@ -276,54 +266,34 @@ def _restore(header: Json, arrays: Arrays) -> tuple[SlamSession, SessionMeta]:
 
 def _load_frontend(config: FrontEndConfig, s: Json, arrays: Arrays) -> FrontEnd:
     frontend = FrontEnd(config)
-    lv = frontend.local_view
-    for template in arrays["frontend.templates"]:
-        lv.add(template)  # the same adds rebuild the same index, at the same counts
-    if lv._indexed != s["indexed"] or not np.array_equal(lv._signs, arrays["frontend.key_signs"]):
-        raise SessionError("the view templates do not rebuild the saved index")
-    lv.last_match = None if s["last_match"] is None else MatchResult(**s["last_match"])
-    frontend.last_view = None if s["last_view"] is None else ViewMatch(**s["last_view"])
-    frontend.frames = int(s["frames"])
-    frontend._last_time = float(s["last_time"])
-    pc = frontend.pose_cells
-    net = pc.network
-    cells = arrays["frontend.pose_cells"]
-    if cells.shape != net.cells.shape:
-        raise SessionError("the pose cell network does not match the front-end settings")
-    net.cells = cells.astype(np.float64)
-    net.best = tuple(float(v) for v in s["best"])  # type: ignore[assignment]
-    pose = arrays["frontend.view_cell_pose"].tolist()
-    decay = arrays["frontend.view_cell_decay"].tolist()
-    decay_frame = arrays["frontend.view_cell_decay_frame"].tolist()
-    experiences = load_lists(arrays, "frontend.view_cell_experiences")
-    pc._views = [
-        _ViewCell(p[0], p[1], p[2], d, f, e)
-        for p, d, f, e in zip(pose, decay, decay_frame, experiences, strict=True)
-    ]
-    pc._experiences = [tuple(e) for e in arrays["frontend.experiences"].tolist()]
-    pc._experience_vt = arrays["frontend.experience_view"].tolist()
-    pc.current_vt = int(s["current_vt"])
-    pc.prev_vt = int(s["prev_vt"])
-    pc.current_exp = int(s["current_exp"])
-    pc._vt_delta_th = float(s["vt_delta_th"])
-    pc._frame = int(s["frame"])
-    pc._odo_update = bool(s["odo_update"])
-    pc._vt_update = bool(s["vt_update"])
+    pose_cells: Json = {name: s[name] for name in _POSE_CELL_SCALARS}
+    pose_cells["network"] = {"cells": arrays["frontend.pose_cells"], "best": s["best"]}
+    for name in ("view_cell_pose", "view_cell_decay", "view_cell_decay_frame"):
+        pose_cells[name] = arrays["frontend." + name]
+    pose_cells["view_cell_experiences"] = load_lists(arrays, "frontend.view_cell_experiences")
+    pose_cells["experiences"] = arrays["frontend.experiences"]
+    pose_cells["experience_view"] = arrays["frontend.experience_view"]
+    frontend.load_state(
+        {
+            "frames": s["frames"],
+            "last_time": s["last_time"],
+            "last_view": s["last_view"],
+            "local_view": {
+                "templates": arrays["frontend.templates"],
+                "key_signs": arrays["frontend.key_signs"],
+                "indexed": s["indexed"],
+                "last_match": s["last_match"],
+            },
+            "pose_cells": pose_cells,
+        }
+    )
     return frontend
 
 
 def _load_log(arrays: Arrays) -> EventLog:
-    columns = {
-        name: arrays[f"log.{name}"] for name in ("kind", "time", "ref", "view", "value0", "value1")
-    }
-    if "log.score" in arrays:  # links' place-recognition scores (absent from older files)
-        columns["score"] = arrays["log.score"]
-    return EventLog.from_columns(  # (ValueError when the frame ends do not match the events)
-        columns,
-        arrays["log.frame_end"],
-        arrays["log.frame_time"],
-        arrays["log.truth"],
-        arrays["log.has_truth"],
+    # (log.score, links' place-recognition scores, is absent from older files)
+    return EventLog.from_state(  # (ValueError when the frame ends do not match the events)
+        {name: arrays["log." + name] for name in _LOG_ARRAYS if "log." + name in arrays}
     )
 
 

@@ -20,7 +20,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode, MapSet
-from cogmap_core.compiled_replay import replay
 from cogmap_core.config import MapParams
 from cogmap_core.evaluation import (
     LAYOUT_RADIUS,
@@ -34,6 +33,7 @@ from cogmap_core.event_log import EventLog
 from cogmap_core.events import MapEvent
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.frontend import FrontEnd, FrontEndConfig
+from cogmap_core.map_build import BuildTask, build_map
 from cogmap_core.map_graph import MapSnapshot
 from cogmap_core.map_modes import ALL_MODES
 
@@ -119,8 +119,10 @@ class SlamSession:
     ) -> dict[MapMode, CognitiveMap]:
         """Rebuild maps from the cached events with other parameters (the bag is not re-read).
 
-        The events are replayed by :func:`cogmap_core.compiled_replay.replay` (compiled when
-        numba is available; the same maps as :meth:`CognitiveMap.apply_all`).
+        Each map is built by :func:`cogmap_core.map_build.build_map` (the events replayed by
+        the compiled replay when numba is available; the same maps as
+        :meth:`CognitiveMap.apply_all`); the end-of-data optimisation runs at the time of the
+        session's last frame, whatever ``frames``.
 
         Args:
             params: the new map parameters.
@@ -132,20 +134,15 @@ class SlamSession:
         """
         modes = modes or self.modes
         log = self.log
-        end = log.event_count if frames is None or frames >= log.frames else 0
-        if frames is not None and 0 < frames < log.frames:
-            end = int(log.frame_end[frames - 1])
-        columns = log.columns(end)
         if finish is None:
-            finish = self.finished and (frames is None or frames >= self.log.frames)
-        rebuilt: dict[MapMode, CognitiveMap] = {}
-        for mode in modes:
-            cmap = CognitiveMap(mode, params)
-            replay(cmap, columns, 0, end)
-            if finish:
-                cmap.finish(self.log.end_time)
-            rebuilt[mode] = cmap
-        return rebuilt
+            finish = self.finished and (frames is None or frames >= log.frames)
+        count = log.frames if frames is None or frames >= log.frames else max(frames, 0)
+        return {
+            mode: build_map(log, BuildTask(mode, params, count, finish), finish_time=log.end_time)[
+                0
+            ]
+            for mode in modes
+        }
 
     def adopt(self, params: MapParams, maps: dict[MapMode, CognitiveMap]) -> None:
         """Make rebuilt maps (and their parameters) the session's current ones."""

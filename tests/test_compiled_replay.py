@@ -22,7 +22,7 @@ import pytest
 from app.server import rebuild
 from app.server.rebuild import BuildTask, build_map_resumed
 from app.server.schedule import schedule_divergence
-from cogmap_core import compiled_loop, compiled_replay, numba_cache
+from cogmap_core import compiled_loop, compiled_replay, map_build, numba_cache
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError
@@ -266,7 +266,7 @@ def test_a_schedule_change_resumes_from_the_last_cluster_it_shares(logs) -> None
 
 
 def test_kept_states_stay_few_and_still_resume_exactly(logs, monkeypatch) -> None:
-    monkeypatch.setattr(rebuild, "MAX_CHECKPOINTS", 3)
+    monkeypatch.setattr(map_build, "MAX_CHECKPOINTS", 3)  # (where the build reads it)
     log = logs["figure_eight_3laps"]
     store: dict = {}
     build_map_resumed(

@@ -523,7 +523,7 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
 
 
 def test_the_session_format_knows_every_attribute() -> None:
-    """A new attribute in a saved class must be added to cogmap_core/session_file.py."""
+    """A new attribute in a saved class must be saved by its state_dict() and load_state()."""
     config = frontend_config_for(Path("none.bag"))
     graph = MapGraph()
     graph.new_id(0, 0.0, 0)

@@ -17,7 +17,10 @@ result -- every map is exactly what ``CognitiveMap(mode, params)`` fed the same 
   a cluster, at which event it closes and the map is optimised). When that schedule over the
   events so far is the same for the old and the new values, the map is the same and is kept.
 
-:class:`ThreadBuilder` does the same work on the calling thread (no worker processes).
+:class:`ThreadBuilder` does the same work on the calling thread (no worker processes). Each map
+is built by :func:`cogmap_core.map_build.build_map`, the path ``SlamSession.rebuild`` takes too
+(interrupted between chunks of events, resumed from the states kept at its clusters' closes when
+only ``T_interval`` and ``T_total`` changed: :func:`schedule_shared`).
 """
 
 from __future__ import annotations
@@ -34,54 +37,31 @@ import threading
 import time
 import traceback
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from app.server.schedule import SCHEDULE_PARAMS, schedule_divergence
-from cogmap_core import compiled_replay
+from cogmap_core import compiled_replay, map_build
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_log import EventLog
 from cogmap_core.events import MapEvent
+from cogmap_core.map_build import (  # re-exported: the rebuilds' names
+    COMPILED_CHUNK,
+    MAX_CHECKPOINTS,
+    REBUILD_CHUNK,
+    Abandoned,
+    BuildTask,
+    Checkpoints,
+    CheckpointStore,
+    Interrupted,
+)
 
-#: Events applied between two checks for a newer request during a rebuild.
-REBUILD_CHUNK = 1000
-#: The same with the compiled replay (:mod:`cogmap_core.compiled_replay`), which also checks
-#: after every event the map's Python code applies (each optimisation among them).
-COMPILED_CHUNK = 20000
 #: How often (s) a waiting builder checks whether its request was superseded.
 POLL_S = 0.005
-
-#: At most this many map states kept per build (:class:`Checkpoints`); past it, every other one
-#: is dropped (60 laps close some 240 clusters, each state a pickle of up to a few MB).
-MAX_CHECKPOINTS = 48
-
-Interrupted = Callable[[], bool]
-
-
-class Abandoned(Exception):
-    """A newer request arrived while maps were being built."""
-
-
-@dataclass(frozen=True, slots=True)
-class BuildTask:
-    """One map to build: ``mode`` with ``params`` from the first ``frames`` frames of the log.
-
-    Attributes:
-        mode: which map.
-        params: its parameters.
-        frames: frames of the event log to apply.
-        finish: run the end-of-data optimisation afterwards.
-
-    """
-
-    mode: MapMode
-    params: MapParams
-    frames: int
-    finish: bool
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,30 +78,19 @@ class Built:
     resumed_at: int = 0
 
 
-@dataclass(slots=True)
-class Checkpoints:
-    """A built map's states at its clusters' closes, to resume a schedule change from.
+def schedule_shared(log: EventLog, end: int, old: MapParams, new: MapParams) -> int | None:
+    """How many of the first ``end`` events maps built with ``old`` and ``new`` apply alike.
 
-    The clustering thresholds ``T_interval`` and ``T_total`` act on a map only through its
-    cluster schedule (:func:`cluster_schedule`): two schedules that agree on their first clusters
-    build the same map up to the first event at which they differ
-    (:func:`schedule_divergence`), so a map for new thresholds continues from the latest state
-    kept before that event instead of from the first event.
-
-    Attributes:
-        params: the parameters the states were built with.
-        states: (events applied, the map pickled) after each event at which a cluster closed,
-            in order (every other one dropped whenever there are more than
-            :data:`MAX_CHECKPOINTS`).
-
+    The rebuilds' :data:`~cogmap_core.map_build.Divergence` rule: the clustering thresholds
+    ``T_interval`` and ``T_total`` act on a map only through its cluster schedule, so for
+    parameters that differ in nothing else the maps agree up to where the schedules part
+    (:func:`~app.server.schedule.schedule_divergence`); any other change is no start at all
+    (None).
     """
-
-    params: MapParams
-    states: list[tuple[int, bytes]]
-
-
-#: Per map, the states its latest build kept (:class:`Checkpoints`), where it was built.
-CheckpointStore = dict[MapMode, Checkpoints]
+    changed = {k for k, v in old.to_dict().items() if getattr(new, k) != v}
+    if not changed <= SCHEDULE_PARAMS:
+        return None
+    return schedule_divergence(log, end, old, new)
 
 
 def build_map(
@@ -133,15 +102,10 @@ def build_map(
 ) -> CognitiveMap:
     """What ``SlamSession.rebuild`` does for one map, abandoned when ``interrupted()`` says so.
 
-    The events are applied by the compiled replay (:mod:`cogmap_core.compiled_replay`) from the
-    log's columns when it is available, else by the map's Python code; both give the same map.
-    ``events``: the log's events already made into objects (at least those the task uses), to
-    skip making them again from the log's columns (the Python path only).
-    ``checkpoints``: map states kept by earlier builds of this log (compiled path only); a
-    build whose parameters differ from those of its map's previous build only in ``T_interval``
-    and ``T_total`` resumes from the latest state before its cluster schedule differs and keeps
-    its own states there (any other change builds from the first event and keeps none, see
-    :func:`_resume`). The map is the same either way.
+    :func:`cogmap_core.map_build.build_map` with the cluster schedule's rule
+    (:func:`schedule_shared`): a build whose parameters differ from those of its map's previous
+    build only in ``T_interval`` and ``T_total`` resumes from the latest state kept in
+    ``checkpoints`` before its cluster schedule differs. The map is the same either way.
 
     Raises:
         Abandoned: ``interrupted()`` returned True between two chunks of events.
@@ -158,75 +122,7 @@ def build_map_resumed(
     checkpoints: CheckpointStore | None = None,
 ) -> tuple[CognitiveMap, int]:
     """:func:`build_map`, and the number of events it resumed after (0: from the first)."""
-    end = int(log.frame_end[task.frames - 1]) if task.frames else 0
-    if compiled_replay.available():
-        cmap, start, states = _resume(log, task, end, checkpoints)
-        columns = log.columns(end)
-        replayer = compiled_replay.CompiledReplay(cmap)
-        closed = _closed_clusters(cmap)
-
-        def after_python(k: int) -> None:  # a cluster closes only in the map's Python code
-            nonlocal closed
-            if interrupted is not None and interrupted():
-                raise Abandoned  # (between two optimisations: a long bag's chunk takes seconds)
-            now = _closed_clusters(cmap)
-            if now != closed and states is not None:
-                closed = now
-                states.append((k + 1, pickle.dumps(cmap, protocol=pickle.HIGHEST_PROTOCOL)))
-                if len(states) > MAX_CHECKPOINTS:  # every other one goes: memory stays bounded
-                    states[:] = states[::2]
-
-        for lo in range(start, end, COMPILED_CHUNK):
-            if interrupted is not None and interrupted():
-                raise Abandoned
-            replayer.apply(columns, lo, min(lo + COMPILED_CHUNK, end), after_python)
-        if checkpoints is not None:
-            checkpoints[task.mode] = Checkpoints(task.params, states or [])
-    else:
-        start = 0
-        cmap = CognitiveMap(task.mode, task.params)
-        source = log.events if events is None else events
-        for lo in range(0, end, REBUILD_CHUNK):
-            if interrupted is not None and interrupted():
-                raise Abandoned
-            cmap.apply_all(source[lo : min(lo + REBUILD_CHUNK, end)])
-    if task.finish and task.frames:
-        cmap.finish(log.frame_time[task.frames - 1])
-    if interrupted is not None and interrupted():
-        raise Abandoned
-    return cmap, start
-
-
-def _closed_clusters(cmap: CognitiveMap) -> int:
-    """How many of a map's loop-closure clusters are closed."""
-    return len(cmap.clusterer.clusters) - (cmap.clusterer.open_cluster is not None)
-
-
-def _resume(
-    log: EventLog, task: BuildTask, end: int, checkpoints: CheckpointStore | None
-) -> tuple[CognitiveMap, int, list[tuple[int, bytes]] | None]:
-    """The map to continue from, the events it holds, and the states kept up to there.
-
-    The states are None when the build keeps none: its parameters differ from the map's
-    previous build in more than the schedule (an α, β or δ change of the compact map, where a
-    pickle per cluster would cost a tenth of the build); the next schedule change builds from
-    the first event and keeps them again.
-    """
-    if checkpoints is None:
-        return CognitiveMap(task.mode, task.params), 0, None
-    held = checkpoints.get(task.mode)
-    if held is not None:
-        changed = {k for k, v in held.params.to_dict().items() if getattr(task.params, k) != v}
-        if not changed <= SCHEDULE_PARAMS:
-            return CognitiveMap(task.mode, task.params), 0, None
-        diverge = schedule_divergence(log, end, held.params, task.params)
-        usable = [state for state in held.states if state[0] <= diverge]
-        if usable:
-            start, blob = usable[-1]
-            cmap: CognitiveMap = pickle.loads(blob)
-            cmap.set_params(task.params)
-            return cmap, start, usable
-    return CognitiveMap(task.mode, task.params), 0, []
+    return map_build.build_map(log, task, interrupted, events, checkpoints, schedule_shared)
 
 
 # ---------------------------------------------------------------------------------- cache
@@ -629,16 +525,22 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 __all__ = [
+    "COMPILED_CHUNK",
+    "MAX_CHECKPOINTS",
+    "REBUILD_CHUNK",
     "Abandoned",
     "BuildTask",
     "Built",
+    "CheckpointStore",
     "Checkpoints",
+    "Interrupted",
     "MapCache",
     "ProcessBuilder",
     "ThreadBuilder",
     "build_map",
     "build_map_resumed",
     "make_builder",
+    "schedule_shared",
 ]
 
 

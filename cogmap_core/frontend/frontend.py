@@ -24,6 +24,8 @@ depends on wall-clock time; ground truth in the frames is never read.
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -112,6 +114,39 @@ class FrontEnd:
         pc.on_view_template(view.template_id, view.relative_rad)
         self.frames += 1
         return events
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict[str, Any]:
+        """Everything but the settings, as plain data; :meth:`load_state` restores it.
+
+        ``frames`` processed, ``last_time``, ``last_view`` (a dict, or None), ``local_view``
+        (:meth:`LocalViewCells.state_dict`) and ``pose_cells``
+        (:meth:`PoseCellExperiences.state_dict`). ``decisions`` (a benchmark's trace) is not
+        state.
+        """
+        last = self.last_view
+        return {
+            "frames": self.frames,
+            "last_time": self._last_time,
+            "last_view": None if last is None else asdict(last),
+            "local_view": self.local_view.state_dict(),
+            "pose_cells": self.pose_cells.state_dict(),
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Continue from the state :meth:`state_dict` described (a front end with no template).
+
+        Raises:
+            StateError: the parts do not fit this front end's settings
+                (:meth:`LocalViewCells.load_state`, :meth:`PoseCellExperiences.load_state`).
+
+        """
+        self.local_view.load_state(state["local_view"])
+        last = state["last_view"]
+        self.last_view = None if last is None else ViewMatch(**last)
+        self.frames = int(state["frames"])
+        self._last_time = float(state["last_time"])
+        self.pose_cells.load_state(state["pose_cells"])
 
     def _action_events(self, action: Action, time: float, events: list[MapEvent]) -> None:
         """Append the map events of a pose-cell action (the module doc's table)."""

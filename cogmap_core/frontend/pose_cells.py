@@ -28,10 +28,12 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from cogmap_core.errors import StateError
 from cogmap_core.frontend.compiled import kernels
 from cogmap_core.frontend.config import FrontEndConfig
 
@@ -101,6 +103,26 @@ class PoseCellNetwork:
         bth = self.n_th // 2
         self.cells[bth, by, bx] = 1.0
         self.best: tuple[float, float, float] = (float(bx), float(by), float(bth))
+
+    def state_dict(self) -> dict[str, Any]:
+        """The activity (``cells``, a copy) and its decoded peak (``best``, a list).
+
+        Everything else follows from the settings. :meth:`load_state` restores it.
+        """
+        return {"cells": self.cells.copy(), "best": list(self.best)}
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Hold the activity and peak :meth:`state_dict` described.
+
+        Raises:
+            StateError: the activity has another shape than this network's settings give.
+
+        """
+        cells = np.asarray(state["cells"])
+        if cells.shape != self.cells.shape:
+            raise StateError("the pose cell network does not match the front-end settings")
+        self.cells = cells.astype(np.float64)
+        self.best = tuple(float(v) for v in state["best"])  # type: ignore[assignment]
 
     # ---------------------------------------------------------------------------- dynamics
     def inject(self, x: float, y: float, th: float, energy: float) -> None:
@@ -387,6 +409,62 @@ class PoseCellExperiences:
         self._frame = 0
         self._odo_update = False
         self._vt_update = False
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything but the settings, as plain data (copies); :meth:`load_state` restores it.
+
+        ``network`` (:meth:`PoseCellNetwork.state_dict`); per view template, its view cell's
+        pose-cell coordinates (``view_cell_pose``, ``(V, 3)``), decay and the frame it was
+        written at, and its experiences (``view_cell_experiences``, lists of ids); per
+        experience, its pose-cell coordinates (``experiences``, ``(E, 3)``) and view template
+        (``experience_view``); and the scalars ``current_vt``, ``prev_vt``, ``current_exp``,
+        ``vt_delta_th`` (the last view's relative angle in theta cells), ``frame``,
+        ``odo_update`` and ``vt_update``.
+        """
+        views = self._views
+        return {
+            "network": self.network.state_dict(),
+            "view_cell_pose": np.array([(v.x, v.y, v.th) for v in views]).reshape(-1, 3),
+            "view_cell_decay": np.array([v.decay for v in views], dtype=np.float64),
+            "view_cell_decay_frame": np.array([v.decay_frame for v in views], dtype=np.int64),
+            "view_cell_experiences": [list(v.experiences) for v in views],
+            "experiences": np.array(self._experiences, dtype=np.float64).reshape(-1, 3),
+            "experience_view": np.array(self._experience_vt, dtype=np.int64),
+            "current_vt": self.current_vt,
+            "prev_vt": self.prev_vt,
+            "current_exp": self.current_exp,
+            "vt_delta_th": self._vt_delta_th,
+            "frame": self._frame,
+            "odo_update": self._odo_update,
+            "vt_update": self._vt_update,
+        }
+
+    def load_state(self, state: dict[str, Any]) -> None:
+        """Hold the state :meth:`state_dict` described.
+
+        Raises:
+            StateError: a pose cell network of another shape (:meth:`PoseCellNetwork.load_state`).
+
+        """
+        self.network.load_state(state["network"])
+        pose = np.asarray(state["view_cell_pose"]).tolist()
+        decay = np.asarray(state["view_cell_decay"]).tolist()
+        decay_frame = np.asarray(state["view_cell_decay_frame"]).tolist()
+        self._views = [
+            _ViewCell(p[0], p[1], p[2], d, f, list(e))
+            for p, d, f, e in zip(
+                pose, decay, decay_frame, state["view_cell_experiences"], strict=True
+            )
+        ]
+        self._experiences = [tuple(e) for e in np.asarray(state["experiences"]).tolist()]
+        self._experience_vt = np.asarray(state["experience_view"]).tolist()
+        self.current_vt = int(state["current_vt"])
+        self.prev_vt = int(state["prev_vt"])
+        self.current_exp = int(state["current_exp"])
+        self._vt_delta_th = float(state["vt_delta_th"])
+        self._frame = int(state["frame"])
+        self._odo_update = bool(state["odo_update"])
+        self._vt_update = bool(state["vt_update"])
 
     @property
     def experience_count(self) -> int:
