@@ -21,13 +21,21 @@ from app.cli_common import (
     input_options_from_args,
     map_changes_from_args,
 )
-from app.inputs import BagSource, GenerationProgress
+from app.inputs import BagSource, GenerationProgress, InputOptions
 from app.server.access import page_url
 from app.server.files import default_export_dir
+from cogmap_core.config import MapParams
 from cogmap_core.datasets.cache import cache_dir
-from cogmap_core.errors import InputFileError, ParameterError
+from cogmap_core.errors import CogmapError, InputFileError, ParameterError
 from cogmap_core.session_file import describe, resume_session
-from cogmap_core.sources.detect import KINDS, check_companions, check_sessions_allowed
+from cogmap_core.sources.detect import (
+    KINDS,
+    InputKind,
+    check_companions,
+    check_sessions_allowed,
+    input_map_params,
+    open_source,
+)
 
 DEFAULT_PORT = 8080
 
@@ -91,6 +99,20 @@ def _network_warning(host: str, port: int, token: str | None) -> str:
     )
 
 
+def _input_defaults(kind: InputKind, bag: str | None, options: InputOptions) -> MapParams:
+    """The input's default map parameters: a log's are measured from it (its odometry scale).
+
+    A log that cannot be read gets its kind's; the page then says what is wrong with it.
+    """
+    if kind.has_camera or bag is None:
+        return kind.map_params
+    try:
+        with open_source(Path(bag), kind.name, log=options.log) as reader:
+            return input_map_params(kind, reader)
+    except CogmapError:
+        return kind.map_params
+
+
 def _serve(args: argparse.Namespace) -> int:
     changes = map_changes_from_args(args)  # read and validated once, before anything starts
     companions = args.loops is not None or args.ground_truth is not None
@@ -99,7 +121,6 @@ def _serve(args: argparse.Namespace) -> int:
     else:  # the built-in dataset, or a missing bag (reported on the page, as for any bag)
         kind = KINDS["bag"]
         check_companions("bag", args.loops, args.ground_truth)
-    params = kind.map_params.with_changes(**changes)
     if kind.has_camera:
         frontend_from_args(args, Path("-"))  # validate --frontend overrides now (no profile)
     # (each input's front end its own: its profile, then --frontend; each camera input's visual
@@ -108,6 +129,8 @@ def _serve(args: argparse.Namespace) -> int:
     input_options = input_options_from_args(
         args, kind, lambda bag_path: frontend_from_args(args, bag_path)
     )
+    defaults = _input_defaults(kind, args.bag, input_options)
+    params = defaults.with_changes(**changes)
     if not 0 < args.port < 65536:
         raise ParameterError(f"port {args.port} is out of range; use 1-65535")
     resume = None
@@ -150,7 +173,7 @@ def _serve(args: argparse.Namespace) -> int:
         static_dir=Path(args.static) if args.static else None,
         rebuild_workers=min(2, os.cpu_count() or 1),
         wait_for_viewer=not args.no_wait,
-        defaults=kind.map_params,
+        defaults=defaults,
         resume=resume,
         export_dir=export_dir,
         data_dirs=data_dirs,

@@ -46,6 +46,7 @@ from cogmap_core.sources.detect import (
     KINDS,
     Source,
     check_sessions_allowed,
+    input_map_params,
     open_source,
     resolve_format,
 )
@@ -79,8 +80,8 @@ class RunOptions:
         until_error: a bag corrupt part-way: map what comes before the damage (bags only).
         resume: continue the session saved in this file (its front end, maps and data time);
             the bag's frames follow the session's as if the bags were one (bags only).
-        param_changes: map parameters that replace the input kind's defaults
-            (:attr:`~cogmap_core.sources.detect.InputKind.map_params`) for a new session, or
+        param_changes: map parameters that replace the input's defaults
+            (:func:`~cogmap_core.sources.detect.input_map_params`) for a new session, or
             with ``resume`` the session's own (its maps are then rebuilt from its events).
         save_session: write the session to this file at the end of the data (before the final
             optimisation, so that a resumed run continues exactly where this one stopped; bags
@@ -210,11 +211,11 @@ class HeadlessPipeline:
         self.meta: SessionMeta | None = None
         self.session: SlamSession  # set by run(), once the output folder is checked
 
-    def _start_session(self) -> SlamSession:
+    def _start_session(self, reader: Source) -> SlamSession:
         """A new session, or the one ``resume`` names (loaded after the output is checked)."""
         changes = self.options.param_changes
         if self.options.resume is None:
-            params = self.kind.map_params.with_changes(**changes)
+            params = input_map_params(self.kind, reader).with_changes(**changes)
             return SlamSession(params, self.frontend, evaluation=self.kind.evaluation)
         path = self.options.resume
         started = wallclock.perf_counter()
@@ -232,7 +233,7 @@ class HeadlessPipeline:
             self._open_source() as reader,
             ReportFolder(self.out_dir, REPORT_FILES, self.options.force) as report,
         ):
-            self.session = self._start_session()
+            self.session = self._start_session(reader)
             offset = 0.0
             if isinstance(reader, BagReader):  # a bag: what a session needs to know of it
                 end = self.session.log.end_time

@@ -77,6 +77,9 @@ class MapParams:
             0.99) and at 1 sigma on Lecture Hall (scene-integration correctness 0.91); at 3
             and 4 every bag figure stays within 5 % of the paper's Huber
             (``docs/maps.md``).
+        odometry_scale: with the noise model, the factor on the odometry edges' sigmas. 1 for
+            camera inputs; a log's default is measured from its own loop candidates
+            (:mod:`~cogmap_core.odometry_scale`: 0.3-1, ``LogReader.map_params``).
 
     """
 
@@ -100,6 +103,7 @@ class MapParams:
     link_sigma_heading: float = 0.1
     loop_model: float = 2.0
     loop_scale: float = 3.0
+    odometry_scale: float = 1.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range."""

@@ -21,6 +21,8 @@ metres of loop-closure error, as in the paper:
   ``ODOMETRY_SIGMA_PER_RADIAN`` |dtheta| + ``ODOMETRY_HEADING_PER_METRE`` d: wheel odometry's
   error grows with the motion it measures.
 
+``MapParams.odometry_scale`` multiplies the sequential edges' sigmas: a log's odometry is
+measured by its own loop candidates (:mod:`cogmap_core.odometry_scale`); 1 for camera inputs.
 ``MapParams.edge_noise_model = 0`` restores the paper's identity weighting.
 """
 
@@ -50,6 +52,7 @@ def edge_information(
     kinds: NDArray[np.int8],
     relative_poses: NDArray[np.float64],
     link_sigmas: tuple[float, float] | None,
+    odometry_scale: float = 1.0,
 ) -> NDArray[np.float64]:
     """``(E, 3, 3)`` information matrices of edges (see the module doc).
 
@@ -58,6 +61,8 @@ def edge_information(
         relative_poses: ``(E, 3)`` measured relative poses (dx, dy, dtheta).
         link_sigmas: a loop-closure link's precision (position m, heading rad); None gives
             the paper's identity information.
+        odometry_scale: the factor on the sequential edges' sigmas (``MapParams.odometry_scale``,
+            :mod:`~cogmap_core.odometry_scale`); not used with identity information.
 
     """
     n = kinds.shape[0]
@@ -75,6 +80,9 @@ def edge_information(
         ODOMETRY_SIGMA_0 + ODOMETRY_SIGMA_PER_RADIAN * turn + ODOMETRY_HEADING_PER_METRE * d,
         link_heading,
     )
+    if odometry_scale != 1.0:
+        factor = np.where(sequential, odometry_scale, 1.0)
+        sigma_xy, sigma_th = sigma_xy * factor, sigma_th * factor
     info[:, 0, 0] = info[:, 1, 1] = (link_position / sigma_xy) ** 2
     info[:, 2, 2] = (link_position / sigma_th) ** 2
     return info

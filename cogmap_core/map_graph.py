@@ -414,12 +414,14 @@ class MapGraph:
             current_pose=current_pose,
         )
 
-    def to_pose_graph(self, link_sigmas: tuple[float, float] | None = None) -> PoseGraph:
+    def to_pose_graph(
+        self, link_sigmas: tuple[float, float] | None = None, odometry_scale: float = 1.0
+    ) -> PoseGraph:
         """The live map as a pose graph, first live vertex fixed.
 
         Information is the identity (the paper), or with ``link_sigmas`` (a loop closure's
-        position and heading precision) each edge's expected precision
-        (:func:`~cogmap_core.edge_noise.edge_information`).
+        position and heading precision) each edge's expected precision, the odometry edges'
+        sigmas times ``odometry_scale`` (:func:`~cogmap_core.edge_noise.edge_information`).
         """
         ids = self.live_ids()
         e = self.live_edges()
@@ -433,7 +435,9 @@ class MapGraph:
             edge_from=edge_from,
             edge_to=edge_to,
             measurements=self.edge_rel[e].copy(),
-            information=edge_information(self.edge_kind[e], self.edge_rel[e], link_sigmas),
+            information=edge_information(
+                self.edge_kind[e], self.edge_rel[e], link_sigmas, odometry_scale
+            ),
             fixed=fixed,
             loop_closure=self.edge_kind[e] == EdgeKind.LOOP_CLOSURE,
         )

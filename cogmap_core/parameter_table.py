@@ -309,6 +309,12 @@ MAP_PARAMETERS: tuple[MapParameter, ...] = (
             place=6,
         ),
     ),
+    MapParameter(
+        name="odometry_scale",
+        meaning="factor on the odometry edges' sigmas (a log's is measured)",
+        valid=(0.0, False, 10.0),
+        maps=_EVERY_MAP,
+    ),
 )
 """The table (module doc), in the order of the fields of ``MapParams``."""
 

@@ -101,6 +101,12 @@ def test_the_valid_ranges_and_meanings_are_as_before():
             "robust loop-closure model (0 the paper's Huber; see robust)",
         ),
         "loop_scale": (0.0, False, 1e6, "scale of the robust loop-closure model (link sigmas)"),
+        "odometry_scale": (
+            0.0,
+            False,
+            10.0,
+            "factor on the odometry edges' sigmas (a log's is measured)",
+        ),
     }
     assert config._WHOLE_NUMBERS == {"loop_model"}
     assert config.parameter_range("delta") == (1.0, False, 1e12)
@@ -183,6 +189,7 @@ def test_the_maps_each_parameter_affects_are_as_before():
         "gate_consensus",
         "loop_model",
         "loop_scale",
+        "odometry_scale",
     }
     integration = {"integration_radius", "integration_max_residual", "integration_min_age"}
     assert PARAMS_USED == {

@@ -72,7 +72,7 @@ from cogmap_core.errors import CogmapError
 from cogmap_core.frames import EventStep, Frame
 from cogmap_core.session_file import SessionMeta
 from cogmap_core.slam import SlamSession
-from cogmap_core.sources.detect import KINDS, LogOptions, Source
+from cogmap_core.sources.detect import KINDS, LogOptions, Source, input_map_params
 
 __all__ = ["ADVANCED_SLIDERS", "SLIDERS", "CogmapApp", "SliderSpec", "clamp_to_slider"]
 
@@ -557,17 +557,19 @@ class CogmapApp:
     def switch_input(self, chosen: DataFile, reader: Source) -> None:
         """Replay ``chosen`` (already open as ``reader``, checked) instead, for everyone.
 
-        A camera input after a log (or a log after one) starts from its kind's default
-        parameters; what each tab picked or routed was the old input's and is dropped.
+        An input whose default parameters differ from the current input's (a camera input
+        after a log, a log after one, another log: each log's odometry scale is its own) starts
+        from its defaults; what each tab picked or routed was the old input's and is dropped.
         """
         kind = KINDS[chosen.kind]
         with self._switch_lock:
             old = self.replay
             params = old.params
             speed = old.speed
-            switched = kind.map_params != self.defaults
-            if switched:  # a log's (or a video's) map parameters are not a bag's: the kind's own
-                params = self.defaults = kind.map_params
+            chosen_defaults = input_map_params(kind, reader)
+            switched = chosen_defaults != self.defaults
+            if switched:  # a log's (or a video's) map parameters are not a bag's: its own
+                params = self.defaults = chosen_defaults
             old.stop()  # joins its worker, which may be waiting for the replay lock
             with self._replay_lock, self.scene_lock:
                 self.streamer.reset()

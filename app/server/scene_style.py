@@ -150,17 +150,22 @@ def edge_errors(cmap: CognitiveMap) -> FloatArray:
     )
 
 
-def edge_error(snap: MapSnapshot, index: int, link_sigmas: tuple[float, float] | None) -> float:
+def edge_error(
+    snap: MapSnapshot,
+    index: int,
+    link_sigmas: tuple[float, float] | None,
+    odometry_scale: float = 1.0,
+) -> float:
     """The norm of edge ``index``'s whitened residual: :func:`edge_errors` of that edge alone.
 
     Computed from the edge's two vertex poses, its measurement and its information (with the
-    map's ``link_sigmas``, :meth:`~cogmap_core.config.MapParams.link_sigmas`), not from the
-    whole pose graph.
+    map's ``link_sigmas``, :meth:`~cogmap_core.config.MapParams.link_sigmas`, and
+    ``odometry_scale``), not from the whole pose graph.
     """
     edge = slice(index, index + 1)
     first, second = np.searchsorted(snap.vertex_ids, (snap.edge_from[index], snap.edge_to[index]))
     measurement = snap.edge_rel[edge]
-    information = edge_information(snap.edge_kind[edge], measurement, link_sigmas)
+    information = edge_information(snap.edge_kind[edge], measurement, link_sigmas, odometry_scale)
     norms = _whitened_norms(
         snap.poses[first : first + 1], snap.poses[second : second + 1], measurement, information
     )

@@ -280,3 +280,14 @@ def open_source(
     else:
         data = read_odometry_csv(path, log.loops, log.ground_truth, log.use_ground_truth)
     return LogReader(data, log.config)
+
+
+def input_map_params(kind: InputKind, source: Source) -> MapParams:
+    """The default map parameters of an opened input.
+
+    Its kind's; a log's with its own odometry scale, measured from its loop candidates
+    (:attr:`LogReader.map_params`).
+    """
+    if isinstance(source, LogReader):
+        return source.map_params
+    return kind.map_params

@@ -26,6 +26,7 @@ from cogmap_core.evaluation import (
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.frames import EventStep
 from cogmap_core.input_reader import InputReader
+from cogmap_core.odometry_scale import OdometryScale, estimate_odometry_scale
 from cogmap_core.sources.log_text import Rows
 from cogmap_core.sources.odometry_log import (
     LOG_EVALUATION,
@@ -58,6 +59,8 @@ class LogStats:
         links: links emitted.
         odometry_gaps: odometry intervals longer than ``max_odometry_gap`` (no motion).
         warnings: one line per kind of loop candidate or odometry interval not used as it was.
+        used_loops: ``(K, 2)`` time and matched time (counted from the log's start) of the
+            candidates kept by the score and travel thresholds, before the duplicates.
 
     """
 
@@ -71,6 +74,7 @@ class LogStats:
     links: int = 0
     odometry_gaps: int = 0
     warnings: list[str] = field(default_factory=list)
+    used_loops: FloatArray = field(default_factory=lambda: np.zeros((0, 2)), compare=False)
 
 
 def loops_in_span(log: OdometryLog, tolerance: float) -> tuple[FloatArray, BoolArray, BoolArray]:
@@ -204,17 +208,27 @@ def _queries(
     out: dict[int, list[tuple[float, float]]] = {}
     if not loops.size:
         return out
-    keep = loops[:, 2] >= cfg.score_threshold
+    keep, close = _candidate_verdicts(loops, times, travelled, cfg)
     stats.below_threshold = int(np.count_nonzero(~keep))
-    step = np.searchsorted(times, loops[:, 0])
-    driven = travelled[step] - np.interp(loops[:, 1], times, travelled)
-    close = keep & (driven < cfg.min_loop_travel)
     stats.too_close = int(np.count_nonzero(close))
+    stats.used_loops = loops[keep & ~close, :2]
+    step = np.searchsorted(times, loops[:, 0])
     for k in np.flatnonzero(keep & ~close).tolist():
         out.setdefault(int(step[k]), []).append((float(loops[k, 2]), float(loops[k, 1])))
     for candidates in out.values():
         candidates.sort(key=lambda c: (-c[0], c[1]))
     return out
+
+
+def _candidate_verdicts(
+    loops: FloatArray, times: FloatArray, travelled: FloatArray, cfg: LogSourceConfig
+) -> tuple[BoolArray, BoolArray]:
+    """Per candidate: its score reaches the threshold; ... but too little was driven since."""
+    keep = loops[:, 2] >= cfg.score_threshold
+    driven = travelled[np.searchsorted(times, loops[:, 0])] - np.interp(
+        loops[:, 1], times, travelled
+    )
+    return keep, keep & (driven < cfg.min_loop_travel)
 
 
 def _nearest(times: list[float], t: float) -> int:
@@ -274,6 +288,7 @@ class LogReader(InputReader):
         self.log = log
         self.config = config or LogSourceConfig()
         self.steps, self.stats = log_steps(log, self.config)
+        self._odometry_scale: OdometryScale | None = None
         self.path = log.path
         self.info = LogInfo(
             path=log.path,
@@ -295,9 +310,24 @@ class LogReader(InputReader):
         return list(self.counters.warnings)
 
     @property
+    def odometry_scale(self) -> OdometryScale:
+        """How precise this log's odometry is, measured by its loop candidates.
+
+        The estimate of :mod:`cogmap_core.odometry_scale` over the candidates the map is given
+        (score and travel thresholds applied), with the log defaults' link precision.
+        """
+        if self._odometry_scale is None:
+            odometry = self.log.odometry.copy()
+            odometry[:, 0] -= self.log.start
+            self._odometry_scale = estimate_odometry_scale(
+                odometry, self.stats.used_loops, LOG_MAP_PARAMS.link_sigma_position
+            )
+        return self._odometry_scale
+
+    @property
     def map_params(self) -> MapParams:
-        """Default map parameters for this kind of input."""
-        return LOG_MAP_PARAMS
+        """Default map parameters for this input: a log's, with its own :attr:`odometry_scale`."""
+        return LOG_MAP_PARAMS.with_changes(odometry_scale=self.odometry_scale.scale)
 
     @property
     def evaluation(self) -> EvaluationSettings:
