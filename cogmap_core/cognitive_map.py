@@ -327,7 +327,7 @@ class CognitiveMap:
 
     def to_pose_graph(self) -> PoseGraph:
         """The live map as the pose graph its optimisation uses (first live vertex fixed)."""
-        return self.graph.to_pose_graph(self.params.link_sigmas(), self.params.odometry_scale)
+        return self.graph.to_pose_graph(self.params.link_sigmas(), self.params.odometry_noise())
 
     def size_history(self) -> tuple[FloatArray, IntArray, IntArray]:
         """(time, vertices, edges) after every event that changed the map's size."""

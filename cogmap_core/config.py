@@ -6,6 +6,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from cogmap_core.edge_noise import OdometryNoise
 from cogmap_core.errors import ParameterError
 from cogmap_core.parameter_table import MAP_PARAMETERS
 from cogmap_core.robust import MAP_IRLS_TOLERANCE, LoopClosureModel, loop_closure_model
@@ -80,6 +81,12 @@ class MapParams:
         odometry_scale: with the noise model, the factor on the odometry edges' sigmas. 1 for
             camera inputs; a log's default is measured from its own loop candidates
             (:mod:`~cogmap_core.odometry_scale`: 0.3-1, ``LogReader.map_params``).
+        odometry_step_length: with the noise model, the length of the odometry steps the map's
+            edges are made of (m): an edge replacing several steps (the compact map's, which
+            declined the vertices between) weighs as that chain of steps
+            (:class:`~cogmap_core.edge_noise.OdometryNoise`). 0 (camera inputs): every edge is
+            one step. A log's is its vertex step (``LogReader.map_params``).
+        odometry_step_turn: ... and their turn (rad); a log's vertex turn.
 
     """
 
@@ -104,6 +111,8 @@ class MapParams:
     loop_model: float = 2.0
     loop_scale: float = 3.0
     odometry_scale: float = 1.0
+    odometry_step_length: float = 0.0
+    odometry_step_turn: float = 0.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range."""
@@ -125,6 +134,12 @@ class MapParams:
         if self.edge_noise_model < 0.5:
             return None
         return self.link_sigma_position, self.link_sigma_heading
+
+    def odometry_noise(self) -> OdometryNoise:
+        """How the odometry edges are weighed beyond the model's rates (scale, steps)."""
+        return OdometryNoise(
+            self.odometry_scale, self.odometry_step_length, self.odometry_step_turn
+        )
 
     def loop_closure_model(self) -> LoopClosureModel | None:
         """The robust loop-closure model the optimisation uses; None for the paper's Huber."""

@@ -23,10 +23,16 @@ metres of loop-closure error, as in the paper:
 
 ``MapParams.odometry_scale`` multiplies the sequential edges' sigmas: a log's odometry is
 measured by its own loop candidates (:mod:`cogmap_core.odometry_scale`); 1 for camera inputs.
+``MapParams.odometry_step_length`` and ``odometry_step_turn`` say how long the odometry steps
+were that the map's edges are made of (a log's vertex step): a compact edge that replaced five
+steps then weighs as the chain of five it replaced (five times one step's variance), not as one
+step five times as long (25 times). Without them (0, camera inputs) every edge is one step.
 ``MapParams.edge_noise_model = 0`` restores the paper's identity weighting.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,11 +54,31 @@ def link_heading_weight(link_sigmas: tuple[float, float] | None) -> float:
     return link_sigmas[0] / link_sigmas[1]
 
 
+@dataclass(frozen=True)
+class OdometryNoise:
+    """How the odometry edges' sigmas are set beyond the model's rates (module doc).
+
+    Attributes:
+        scale: the factor on their sigmas (``MapParams.odometry_scale``, measured for a log by
+            :mod:`~cogmap_core.odometry_scale`).
+        step_length: the odometry steps an edge is made of (m): an edge of length ``d`` turning
+            ``dtheta`` is the chain of ``n = max(1, d / step_length, |dtheta| / step_turn)``
+            equal steps it replaced, and its variance that chain's, ``n`` times one step's; 0:
+            every edge is one step (``MapParams.odometry_step_length``).
+        step_turn: ... and their turn (rad; ``MapParams.odometry_step_turn``).
+
+    """
+
+    scale: float = 1.0
+    step_length: float = 0.0
+    step_turn: float = 0.0
+
+
 def edge_information(
     kinds: NDArray[np.int8],
     relative_poses: NDArray[np.float64],
     link_sigmas: tuple[float, float] | None,
-    odometry_scale: float = 1.0,
+    odometry: OdometryNoise | None = None,
 ) -> NDArray[np.float64]:
     """``(E, 3, 3)`` information matrices of edges (see the module doc).
 
@@ -61,8 +87,8 @@ def edge_information(
         relative_poses: ``(E, 3)`` measured relative poses (dx, dy, dtheta).
         link_sigmas: a loop-closure link's precision (position m, heading rad); None gives
             the paper's identity information.
-        odometry_scale: the factor on the sequential edges' sigmas (``MapParams.odometry_scale``,
-            :mod:`~cogmap_core.odometry_scale`); not used with identity information.
+        odometry: the odometry edges' scale and steps (default: the model as it is); not used
+            with identity information.
 
     """
     n = kinds.shape[0]
@@ -74,15 +100,22 @@ def edge_information(
     d = np.hypot(relative_poses[:, 0], relative_poses[:, 1])
     turn = np.abs(relative_poses[:, 2])
     sequential = kinds == 0
-    sigma_xy = np.where(sequential, ODOMETRY_SIGMA_0 + ODOMETRY_SIGMA_PER_METRE * d, link_position)
-    sigma_th = np.where(
-        sequential,
-        ODOMETRY_SIGMA_0 + ODOMETRY_SIGMA_PER_RADIAN * turn + ODOMETRY_HEADING_PER_METRE * d,
-        link_heading,
+    odometry = odometry or OdometryNoise()
+    steps = np.ones(n)
+    if odometry.step_length > 0:
+        steps = np.maximum(steps, d / odometry.step_length)
+    if odometry.step_turn > 0:
+        steps = np.maximum(steps, turn / odometry.step_turn)
+    # a chain of n steps of d / n and turn / n: n x one step's variance (sqrt(n) x its sigma)
+    chain = np.sqrt(steps) * odometry.scale
+    step_xy = ODOMETRY_SIGMA_0 + ODOMETRY_SIGMA_PER_METRE * d / steps
+    step_th = (
+        ODOMETRY_SIGMA_0
+        + ODOMETRY_SIGMA_PER_RADIAN * turn / steps
+        + ODOMETRY_HEADING_PER_METRE * d / steps
     )
-    if odometry_scale != 1.0:
-        factor = np.where(sequential, odometry_scale, 1.0)
-        sigma_xy, sigma_th = sigma_xy * factor, sigma_th * factor
+    sigma_xy = np.where(sequential, chain * step_xy, link_position)
+    sigma_th = np.where(sequential, chain * step_th, link_heading)
     info[:, 0, 0] = info[:, 1, 1] = (link_position / sigma_xy) ** 2
     info[:, 2, 2] = (link_position / sigma_th) ** 2
     return info

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cogmap_core.edge_noise import edge_information
+from cogmap_core.edge_noise import OdometryNoise, edge_information
 from cogmap_core.errors import EventError, StateError
 from cogmap_core.geometry import (
     compose,
@@ -415,13 +415,15 @@ class MapGraph:
         )
 
     def to_pose_graph(
-        self, link_sigmas: tuple[float, float] | None = None, odometry_scale: float = 1.0
+        self,
+        link_sigmas: tuple[float, float] | None = None,
+        odometry: OdometryNoise | None = None,
     ) -> PoseGraph:
         """The live map as a pose graph, first live vertex fixed.
 
         Information is the identity (the paper), or with ``link_sigmas`` (a loop closure's
-        position and heading precision) each edge's expected precision, the odometry edges'
-        sigmas times ``odometry_scale`` (:func:`~cogmap_core.edge_noise.edge_information`).
+        position and heading precision) each edge's expected precision, the odometry edges' as
+        ``odometry`` says (:func:`~cogmap_core.edge_noise.edge_information`).
         """
         ids = self.live_ids()
         e = self.live_edges()
@@ -436,7 +438,7 @@ class MapGraph:
             edge_to=edge_to,
             measurements=self.edge_rel[e].copy(),
             information=edge_information(
-                self.edge_kind[e], self.edge_rel[e], link_sigmas, odometry_scale
+                self.edge_kind[e], self.edge_rel[e], link_sigmas, odometry
             ),
             fixed=fixed,
             loop_closure=self.edge_kind[e] == EdgeKind.LOOP_CLOSURE,

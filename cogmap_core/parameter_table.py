@@ -315,6 +315,18 @@ MAP_PARAMETERS: tuple[MapParameter, ...] = (
         valid=(0.0, False, 10.0),
         maps=_EVERY_MAP,
     ),
+    MapParameter(
+        name="odometry_step_length",
+        meaning="length of the odometry steps an edge is made of (m; 0: one per edge)",
+        valid=(0.0, True, 1e6),
+        maps=_EVERY_MAP,
+    ),
+    MapParameter(
+        name="odometry_step_turn",
+        meaning="turn of the odometry steps an edge is made of (rad; 0: one per edge)",
+        valid=(0.0, True, 1e6),
+        maps=_EVERY_MAP,
+    ),
 )
 """The table (module doc), in the order of the fields of ``MapParams``."""
 

@@ -9,7 +9,7 @@ import pytest
 
 from cogmap_core.datasets.log_generator import LogGeneratorConfig, generate_log
 from cogmap_core.datasets.log_writer import write_log
-from cogmap_core.edge_noise import edge_information
+from cogmap_core.edge_noise import OdometryNoise, edge_information
 from cogmap_core.odometry_scale import (
     MIN_CANDIDATES,
     MIN_SCALE,
@@ -82,11 +82,30 @@ def test_the_odometry_edges_sigmas_are_scaled_and_the_links_kept() -> None:
     rel = np.array([[1.0, 0.0, 0.1], [0.2, 0.1, 0.0], [0.5, 0.0, -0.3]])
     sigmas = (0.5, 0.5)
     plain = edge_information(kinds, rel, sigmas)
-    scaled = edge_information(kinds, rel, sigmas, 0.5)
+    scaled = edge_information(kinds, rel, sigmas, OdometryNoise(scale=0.5))
     np.testing.assert_allclose(scaled[[0, 2]], plain[[0, 2]] / 0.25, rtol=1e-15)
     np.testing.assert_array_equal(scaled[1], plain[1])
-    identity = edge_information(kinds, rel, None, 0.5)  # the paper's weights: no noise model
+    identity = edge_information(kinds, rel, None, OdometryNoise(0.5, 0.2, 0.2))  # no model
     np.testing.assert_array_equal(identity, np.tile(np.eye(3), (3, 1, 1)))
+
+
+def test_an_edge_of_several_steps_weighs_as_their_chain() -> None:
+    kinds = np.array([0, 0, 0, 1], dtype=np.int8)
+    rel = np.array([[1.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.1, 0.0, 0.6], [1.0, 0.0, 0.0]])
+    sigmas = (0.5, 0.22)
+    info = edge_information(kinds, rel, sigmas, OdometryNoise(1.0, 0.2, 0.2))
+    # 1 m straight: five steps of 0.2 m, each sigma 0.005 + 0.05 x 0.2 (position),
+    # 0.005 + 0.03 x 0.2 (heading); the chain's variance is five times one step's
+    assert info[0, 0, 0] == pytest.approx(0.5**2 / (5 * (0.005 + 0.01) ** 2), rel=1e-12)
+    assert info[0, 2, 2] == pytest.approx(0.5**2 / (5 * (0.005 + 0.006) ** 2), rel=1e-12)
+    one_step = edge_information(kinds, rel, sigmas)  # an edge of one step: as before
+    np.testing.assert_allclose(info[1], one_step[1], rtol=1e-12)
+    # 0.6 rad turned on 0.1 m: three steps of 0.2 rad
+    assert info[2, 2, 2] == pytest.approx(
+        0.5**2 / (3 * (0.005 + 0.05 * 0.2 + 0.03 * 0.1 / 3) ** 2), rel=1e-12
+    )
+    np.testing.assert_array_equal(info[3], one_step[3])  # a link is no chain
+    assert one_step[0, 0, 0] == pytest.approx(0.5**2 / (0.005 + 0.05) ** 2, rel=1e-12)
 
 
 @pytest.mark.parametrize(("drift", "stiffer"), [("medium", True), ("extreme", False)])
@@ -102,6 +121,7 @@ def test_a_log_s_defaults_carry_its_own_odometry_scale(
     assert (estimate.scale < 1.0) is stiffer and estimate.scale >= MIN_SCALE
     defaults = input_map_params(KINDS["tuc"], reader)
     assert defaults == LOG_MAP_PARAMS.with_changes(odometry_scale=estimate.scale)
+    assert (defaults.odometry_step_length, defaults.odometry_step_turn) == (0.2, 0.2)
     assert reader.map_params == defaults
     # the candidates it is measured over are those the map is given
     assert estimate.candidates <= reader.stats.used_loops.shape[0] <= reader.stats.loop_candidates

@@ -107,6 +107,18 @@ def test_the_valid_ranges_and_meanings_are_as_before():
             10.0,
             "factor on the odometry edges' sigmas (a log's is measured)",
         ),
+        "odometry_step_length": (
+            0.0,
+            True,
+            1e6,
+            "length of the odometry steps an edge is made of (m; 0: one per edge)",
+        ),
+        "odometry_step_turn": (
+            0.0,
+            True,
+            1e6,
+            "turn of the odometry steps an edge is made of (rad; 0: one per edge)",
+        ),
     }
     assert config._WHOLE_NUMBERS == {"loop_model"}
     assert config.parameter_range("delta") == (1.0, False, 1e12)
@@ -190,6 +202,8 @@ def test_the_maps_each_parameter_affects_are_as_before():
         "loop_model",
         "loop_scale",
         "odometry_scale",
+        "odometry_step_length",
+        "odometry_step_turn",
     }
     integration = {"integration_radius", "integration_max_residual", "integration_min_age"}
     assert PARAMS_USED == {

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from app.palette import cluster_color
 from cogmap_core.cognitive_map import CognitiveMap
-from cogmap_core.edge_noise import edge_information
+from cogmap_core.edge_noise import OdometryNoise, edge_information
 from cogmap_core.edge_residuals import EdgeModel, edge_terms
 from cogmap_core.map_graph import MapSnapshot
 
@@ -154,18 +154,19 @@ def edge_error(
     snap: MapSnapshot,
     index: int,
     link_sigmas: tuple[float, float] | None,
-    odometry_scale: float = 1.0,
+    odometry: OdometryNoise | None = None,
 ) -> float:
     """The norm of edge ``index``'s whitened residual: :func:`edge_errors` of that edge alone.
 
     Computed from the edge's two vertex poses, its measurement and its information (with the
-    map's ``link_sigmas``, :meth:`~cogmap_core.config.MapParams.link_sigmas`, and
-    ``odometry_scale``), not from the whole pose graph.
+    map's ``link_sigmas``, :meth:`~cogmap_core.config.MapParams.link_sigmas`, and its
+    ``odometry``, :meth:`~cogmap_core.config.MapParams.odometry_noise`), not from the whole pose
+    graph.
     """
     edge = slice(index, index + 1)
     first, second = np.searchsorted(snap.vertex_ids, (snap.edge_from[index], snap.edge_to[index]))
     measurement = snap.edge_rel[edge]
-    information = edge_information(snap.edge_kind[edge], measurement, link_sigmas, odometry_scale)
+    information = edge_information(snap.edge_kind[edge], measurement, link_sigmas, odometry)
     norms = _whitened_norms(
         snap.poses[first : first + 1], snap.poses[second : second + 1], measurement, information
     )

@@ -326,8 +326,15 @@ class LogReader(InputReader):
 
     @property
     def map_params(self) -> MapParams:
-        """Default map parameters for this input: a log's, with its own :attr:`odometry_scale`."""
-        return LOG_MAP_PARAMS.with_changes(odometry_scale=self.odometry_scale.scale)
+        """Default map parameters for this input: a log's, with its own :attr:`odometry_scale`.
+
+        The odometry steps the map's edges are made of are the reader's vertex step and turn.
+        """
+        return LOG_MAP_PARAMS.with_changes(
+            odometry_scale=self.odometry_scale.scale,
+            odometry_step_length=self.config.vertex_step,
+            odometry_step_turn=self.config.vertex_turn,
+        )
 
     @property
     def evaluation(self) -> EvaluationSettings:

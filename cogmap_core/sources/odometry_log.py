@@ -130,6 +130,13 @@ LOG_MAP_CHANGES: dict[str, float] = {
     # refused link only drops evidence, and on Lecture Hall the test does not improve the maps.
     "gate_position": 1e9,
     "gate_heading": 1e9,
+    # The map's edges are made of the reader's vertex steps (0.2 m or 0.2 rad, LogSourceConfig;
+    # LogReader.map_params takes the reader's own): the compact map's metre-long edges weigh as
+    # the five steps they replaced, not as one step five times as long -- 2.7 x its variance,
+    # which let the compact maps bend to structured false clusters the standard map refused
+    # (parallel_corridors_1 compact 3.08 -> 0.90 x its true-links map; docs/maps.md).
+    "odometry_step_length": 0.2,
+    "odometry_step_turn": 0.2,
 }
 LOG_MAP_PARAMS = MapParams().with_changes(**LOG_MAP_CHANGES)
 """Default map parameters for odometry + place-recognition logs."""

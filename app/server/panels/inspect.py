@@ -91,7 +91,7 @@ def describe_edge(
     """What the page says about edge ``index`` of ``snap`` (with its residual)."""
     kind = "loop closure" if snap.edge_kind[index] == EdgeKind.LOOP_CLOSURE else "sequential"
     dx, dy, dtheta = snap.edge_rel[index]
-    residual = edge_error(snap, index, cmap.params.link_sigmas(), cmap.params.odometry_scale)
+    residual = edge_error(snap, index, cmap.params.link_sigmas(), cmap.params.odometry_noise())
     rows = [
         ("map", cmap.mode.value),
         ("edge", f"{int(snap.edge_from[index])} → {int(snap.edge_to[index])} ({kind})"),
