@@ -3,6 +3,7 @@
 - :mod:`app.server.replay` -- the worker thread owning the SLAM session (playback; its rebuilds
   in :mod:`app.server.replay_rebuilds`, its state in :mod:`app.server.replay_state`).
 - :mod:`app.server.rebuild` -- rebuilding maps for new parameters (worker processes, cache).
+- :mod:`app.server.preview` -- what a slow rebuild shows at once, before its exact map.
 - :mod:`app.server.figures_worker` -- the maps' accuracy figures, on a thread of their own.
 - :mod:`app.server.scene` -- incremental streaming of the maps into the 3-D scene
   (:mod:`~app.server.map_layer`, :mod:`~app.server.scene_nodes`, :mod:`~app.server.scene_style`).

@@ -479,7 +479,11 @@ class CogmapApp:
         )
         rebuilding = r.rebuilding
         self._rebuild_shown = rebuilding
-        set_content(self.live.built_html, built_content(r.session.maps.maps, rebuilding))
+        with r.lock:
+            previews = {mode: p.description for mode, p in r.previews.items()}
+            differences = dict(r.rebuilds[-1].preview_difference) if r.rebuilds else {}
+            content = built_content(r.session.maps.maps, rebuilding, previews, differences)
+        set_content(self.live.built_html, content)
         self.playback.follow(force)
 
     _update_status = update_status  # (the name tests use)
@@ -550,7 +554,13 @@ class CogmapApp:
         }
         odometry = self._dead_reckoning() if self.streamer.show_odometry else None
         self.streamer.publish(
-            dict(session.maps.maps), truth, count, extras, odometry, self.replay.duration
+            self.replay.shown_maps(),  # (a map being rebuilt may be drawn by its preview)
+            truth,
+            count,
+            extras,
+            odometry,
+            self.replay.duration,
+            previewed=tuple(self.replay.previews),
         )
 
     # ------------------------------------------------------------------ another input

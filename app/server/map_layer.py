@@ -115,6 +115,7 @@ class MapLayer:
             visible=False,
         )
         self._label_at: tuple[float, float] | None = None
+        self.previewed = False  # the map drawn is a preview (:mod:`app.server.preview`)
 
         def vertices(name: str, part: np.ndarray, _: np.ndarray | None) -> viser.SceneNodeHandle:
             return scene.add_point_cloud(
@@ -254,6 +255,13 @@ class MapLayer:
             if not self.label.visible:
                 self.label.visible = True
             self._label_at = at
+
+    def set_previewed(self, previewed: bool) -> None:
+        """Name the map a preview (its exact rebuild is on its way), or the map again."""
+        if previewed != self.previewed:
+            self.previewed = previewed
+            name = self.mode.value.replace("_", " ")
+            self.label.text = f"{name} · preview" if previewed else name
 
     @property
     def visible(self) -> bool:

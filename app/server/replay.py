@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Protocol
 
 from app.inputs import ReplayInput
+from app.server.preview import Preview
 from app.server.rebuild import Abandoned, Builder, MapCache, ThreadBuilder
 from app.server.replay_rebuilds import PARAMS_USED, ReplayRebuilds, needs_rebuild
 from app.server.replay_state import PlaybackState, RebuildRecord
@@ -185,6 +186,9 @@ class Replay(ReplayRebuilds):
         #: a parameter change being rebuilt: (its parameters, the maps still to show), or None
         self.rebuilding: tuple[MapParams, tuple[MapMode, ...]] | None = None
         self.rebuilds: list[RebuildRecord] = []
+        #: maps drawn before their exact rebuild arrives (:mod:`app.server.preview`); never in
+        #: the session (read under ``lock``)
+        self.previews: dict[MapMode, Preview] = {}
         self.frame_time = math.nan  # data time of the last frame applied
         self.processing_s = 0.0  # wall time spent applying frames (front end + maps)
         self._frames: Iterator[Frame | EventStep] | None = None

@@ -7,6 +7,10 @@ schedule as it is), taken from the :class:`~app.server.rebuild.MapCache` (built 
 parameters) or *built* by the :class:`~app.server.rebuild.Builder`; the displayed maps first, the
 latest request winning (a newer one abandons the rebuild). A restart or a seek backwards rebuilds
 the maps up to the new position from the session's cached events the same way.
+
+A map to be built whose last build took longer than :data:`~app.server.preview.PREVIEW_AFTER_S`
+(or that was never built) is first shown as a *preview* (:mod:`app.server.preview`): kept in
+``previews``, drawn instead of the session's map until its exact map is published, never adopted.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
+from app.server import preview as preview_module
+from app.server.preview import Preview, make_preview, preview_difference
 from app.server.rebuild import Abandoned, Builder, BuildTask, MapCache
 from app.server.replay_state import PlaybackState, RebuildRecord
 from app.server.schedule import same_schedule
@@ -87,11 +93,26 @@ class ReplayRebuilds:
     processing_s: float
     rebuilding: tuple[MapParams, tuple[MapMode, ...]] | None
     rebuilds: list[RebuildRecord]
+    previews: dict[MapMode, Preview]
     builder: Builder
     cache: MapCache
 
     # ------------------------------------------------------------------ restart, seek
+    def shown_maps(self) -> dict[MapMode, CognitiveMap]:
+        """The maps to draw: the session's, a map being rebuilt by its preview (call locked)."""
+        maps = dict(self.session.maps.maps)
+        maps.update({mode: p.cmap for mode, p in self.previews.items() if mode in maps})
+        return maps
+
+    def _drop_previews(self) -> bool:
+        """Forget the previews shown (True if there were any)."""
+        with self.lock:
+            dropped = bool(self.previews)
+            self.previews.clear()
+        return dropped
+
     def _do_restart(self) -> None:
+        self._drop_previews()
         with self._cond:
             self._restart_request = False
             self._fast_forward_to = None
@@ -165,6 +186,7 @@ class ReplayRebuilds:
             self._keep_replaced(maps)
             _label_params(maps, params)
             self.session.adopt(params, maps)
+            self.previews.clear()
             self.session.finished = False
             if k == base:
                 self.processing_s = 0.0
@@ -238,6 +260,7 @@ class ReplayRebuilds:
         self, record: RebuildRecord, params: MapParams, frames: int, finish: bool, generation: int
     ) -> None:
         log = self.session.log
+        dropped = self._drop_previews()  # (an abandoned rebuild's: each map is shown anew)
         tasks = []
         unchanged: dict[MapParams, bool] = {}  # per parameters in use (the maps mostly share)
         for mode in self._order():
@@ -263,11 +286,48 @@ class ReplayRebuilds:
                 tasks.append(BuildTask(mode, params, frames, finish))
                 continue
             self._publish_rebuilt(record, mode, params, cmap, time.perf_counter() - started)
+        self._publish_previews(record, params, tuple(task.mode for task in tasks), dropped)
         for built in self.builder.build(log, tasks, lambda: self._generation != generation):
             record.how[built.task.mode] = "built"
             record.resumed[built.task.mode] = built.resumed_at
             self._publish_rebuilt(record, built.task.mode, params, built.cmap, built.compute_s)
         record.completed = True
+
+    def _last_build_s(self, mode: MapMode) -> float | None:
+        """How long the last build of map ``mode`` took (s; None: never built after a change)."""
+        for record in reversed(self.rebuilds):
+            if record.how.get(mode) == "built" and mode in record.compute_s:
+                return record.compute_s[mode]
+        return None
+
+    def _publish_previews(
+        self,
+        record: RebuildRecord,
+        params: MapParams,
+        modes: tuple[MapMode, ...],
+        redraw: bool = False,
+    ) -> None:
+        """Show a preview of each of ``modes`` (to be built) whose build is slow, if it has one.
+
+        ``redraw``: the maps are drawn again even without a preview (previews were dropped).
+        """
+        shown: dict[MapMode, Preview] = {}
+        maps = self.session.maps.maps  # (only this thread changes them)
+        for mode in modes:
+            last = self._last_build_s(mode)
+            if last is not None and last <= preview_module.PREVIEW_AFTER_S:
+                continue
+            preview = make_preview(mode, maps[mode], maps.get(MapMode.STANDARD), params)
+            if preview is not None:
+                shown[mode] = preview
+        if shown:
+            with self.lock:
+                self.previews.update(shown)
+        if shown or redraw:
+            self._notify_maps((), True)  # (drawn: no accuracy figures for a preview)
+            now = time.perf_counter()
+            for mode in shown:
+                record.previewed[mode] = now
 
     def _publish_rebuilt(
         self,
@@ -278,10 +338,14 @@ class ReplayRebuilds:
         compute_s: float,
     ) -> None:
         record.compute_s[mode] = compute_s
+        previewed = self.previews.get(mode)
+        if previewed is not None:
+            record.preview_difference[mode] = preview_difference(previewed.cmap, cmap)
         with self.lock:
             self._keep_replaced({mode: cmap})
             _label_params({mode: cmap}, params)
             self.session.adopt(params, {mode: cmap})
+            self.previews.pop(mode, None)
         pending = self.rebuilding
         if pending is not None:
             self.rebuilding = (pending[0], tuple(m for m in pending[1] if m is not mode))

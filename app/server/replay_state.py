@@ -39,6 +39,11 @@ class RebuildRecord:
             kept at the last cluster close its schedule shares with the map built before
             (:class:`~app.server.rebuild.Checkpoints`); 0 when built from the first event.
         completed: all maps rebuilt (False: abandoned for newer parameters).
+        previewed: ``time.perf_counter()`` when a preview of a map was handed to the listener
+            (:mod:`app.server.preview`; only maps whose rebuild is slow, before their exact map).
+        preview_difference: per previewed map whose exact map arrived, how far the preview was
+            from it: (largest vertex shift in m, the preview's vertices minus the exact map's;
+            :func:`~app.server.preview.preview_difference`).
 
     """
 
@@ -50,8 +55,18 @@ class RebuildRecord:
     how: dict[MapMode, str] = field(default_factory=dict)
     resumed: dict[MapMode, int] = field(default_factory=dict)
     completed: bool = False
+    previewed: dict[MapMode, float] = field(default_factory=dict)
+    preview_difference: dict[MapMode, tuple[float, int]] = field(default_factory=dict)
 
     def latency(self, mode: MapMode) -> float | None:
         """Seconds from the request to map ``mode`` being shown (None if it never was)."""
         at = self.published.get(mode)
         return None if at is None else at - self.requested
+
+    def preview_latency(self, mode: MapMode) -> float | None:
+        """Seconds from the request to the first map ``mode`` shown: a preview or the exact map.
+
+        (:meth:`latency` when there was no preview; None if neither was shown.)
+        """
+        at = self.previewed.get(mode)
+        return self.latency(mode) if at is None else at - self.requested

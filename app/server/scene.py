@@ -263,8 +263,13 @@ class SceneStreamer:
         extras: dict[MapMode, MapExtras] | None = None,
         odometry: FloatArray | None = None,
         duration: float = 0.0,
+        previewed: Iterable[MapMode] = (),
     ) -> None:
-        """Send what changed in the maps viewers show (the others when they are shown)."""
+        """Send what changed in the maps viewers show (the others when they are shown).
+
+        ``previewed``: the maps in ``maps`` that are previews (their names say so).
+        """
+        previewed = set(previewed)
         started = time.perf_counter()
         truth = self._truth_poses(ground_truth, ground_truth_count)
         truth_segments = None if truth is None else path_segments(truth, GROUND_TRUTH_Z)
@@ -281,6 +286,7 @@ class SceneStreamer:
                     duration,
                 )
                 layer.update_paths(truth_segments, odometry_segments, truth)
+                layer.set_previewed(mode in previewed)
             self._resize()
             section, _ = grid_spacing(self.span())
             for mode in self.needed & set(maps):

@@ -108,8 +108,16 @@ def build_parameters(gui: viser.GuiApi, params: MapParams, defaults: MapParams) 
 def built_content(
     maps: Mapping[MapMode, CognitiveMap],
     rebuilding: tuple[MapParams, tuple[MapMode, ...]] | None,
+    previews: Mapping[MapMode, str] | None = None,
+    differences: Mapping[MapMode, tuple[float, int]] | None = None,
 ) -> str:
-    """What the maps were built with, and which are being rebuilt (for what)."""
+    """What the maps were built with, and which are being rebuilt (for what).
+
+    ``previews``: the maps drawn by a preview until their exact map arrives, with what the
+    preview is (:mod:`app.server.preview`); ``differences``: per map of the latest parameter
+    change whose exact map replaced a preview, how far the preview was from it (largest vertex
+    shift in m, the preview's vertices minus the exact map's).
+    """
     groups: dict[MapParams, list[str]] = {}
     for mode in ALL_MODES:
         if mode in maps:
@@ -128,6 +136,7 @@ def built_content(
             for params, names in groups.items()
         ]
     content = '<div class="cogmap-note" id="cogmap-built">' + "<br>".join(lines) + "</div>"
+    content = _preview_notes(previews or {}, differences or {}) + content
     if rebuilding is not None:
         params, pending = rebuilding
         changes = []
@@ -144,6 +153,27 @@ def built_content(
             f"{html.escape(names)} for {html.escape(what)} …</div>" + content
         )
     return content
+
+
+def _preview_notes(
+    previews: Mapping[MapMode, str], differences: Mapping[MapMode, tuple[float, int]]
+) -> str:
+    """The maps shown as a preview, and how far the latest previews were from the exact maps."""
+    lines = [
+        f"<b>{html.escape(mode.value.replace('_', ' '))}: preview</b> "
+        f"({html.escape(what)}) until the exact map arrives"
+        for mode, what in previews.items()
+    ]
+    for mode in ALL_MODES:
+        if mode in differences and mode not in previews:
+            shift, count = differences[mode]
+            lines.append(
+                f"{html.escape(mode.value.replace('_', ' '))}: exact map shown; the preview "
+                f"differed by {shift:.3f} m (largest vertex shift), {count:+d} vertices"
+            )
+    if not lines:
+        return ""
+    return '<div class="cogmap-note" id="cogmap-preview">' + "<br>".join(lines) + "</div>"
 
 
 class ParametersHost(Protocol):
