@@ -6,7 +6,7 @@ of the cluster schedule runs again. This benchmark splits that cost in two for e
 the compiled replay (``cogmap_core/compiled_replay.py``, numba) and with the map's Python code
 (``COGMAP_COMPILED_REPLAY=0``), measured in the same process:
 
-- **full**: the rebuild as the page does it (``app.server.rebuild.build_map``: the events and
+- **full**: the rebuild as the page does it (``cogmap_core.map_build.build_map``: the events and
   the Ceres solves);
 - **events only**: the same replay with every solve skipped (the optimiser returns its start
   poses, so the maps differ; only the time counts). No exact rebuild can be faster than this:
@@ -40,12 +40,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import cogmap_core.cognitive_map as cognitive_map  # noqa: E402
 from app.cli_common import resolve_bag  # noqa: E402
 from app.events_cache import cached_bag_events  # noqa: E402
-from app.server.rebuild import BuildTask, build_map  # noqa: E402
 from cogmap_core import compiled_replay  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.event_log import EventLog  # noqa: E402
 from cogmap_core.events import MapEvent  # noqa: E402
+from cogmap_core.map_build import BuildTask, build_map  # noqa: E402
 from cogmap_core.optimizer import OptimizationResult, OptimizerOptions  # noqa: E402
 from cogmap_core.posegraph import PoseGraph  # noqa: E402
 
@@ -81,7 +81,7 @@ def build_seconds(
     try:
         for _ in range(repeat):
             started = time.perf_counter()
-            cmap = build_map(log, task, events=events)
+            cmap, _ = build_map(log, task, events=events)
             best = min(best, time.perf_counter() - started)
             count = len(cmap.optimizations)
     finally:

@@ -2,7 +2,7 @@
 
 A map rebuild runs one Ceres solve per cluster of the schedule (``cogmap_core/optimizer.py``).
 This benchmark builds each map of the default dataset (or a bag or log given) once, as the page
-rebuilds it (``app.server.rebuild.build_map``), recording every graph the map hands to
+rebuilds it (``cogmap_core.map_build.build_map``), recording every graph the map hands to
 :func:`~cogmap_core.optimizer.optimize_pose_graph`; then it solves the recorded graphs with the
 optimiser of this working tree (*new*) and with ``cogmap_core/optimizer.py`` as it was at a git
 revision (*old*, ``--baseline``, loaded from ``git show`` into this process), alternating the
@@ -33,11 +33,11 @@ sys.path.insert(0, str(ROOT))
 import cogmap_core.cognitive_map as cognitive_map  # noqa: E402
 from app.cli_common import resolve_bag  # noqa: E402
 from app.events_cache import cached_bag_events  # noqa: E402
-from app.server.rebuild import BuildTask, build_map  # noqa: E402
 from cogmap_core import optimizer  # noqa: E402
 from cogmap_core.cognitive_map import MapMode  # noqa: E402
 from cogmap_core.config import MapParams  # noqa: E402
 from cogmap_core.event_log import EventLog  # noqa: E402
+from cogmap_core.map_build import BuildTask, build_map  # noqa: E402
 from cogmap_core.map_modes import ALL_MODES  # noqa: E402
 
 #: The optimiser before the solves were made faster (issue 27, part 3).

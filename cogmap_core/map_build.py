@@ -13,9 +13,11 @@ resume from:
   in chunks between which ``interrupted()`` is asked (:class:`Abandoned`);
 - with a :data:`CheckpointStore`, a build keeps the map's states at its clusters' closes
   (:class:`Checkpoints`) and a later build of the same map continues from the latest state its
-  events share with them, which a :data:`Divergence` rule tells (the web app's: the cluster
-  schedule of ``T_interval`` and ``T_total``; by default only identical parameters share
-  events). The map is the same either way.
+  events share with them, which a :data:`Divergence` rule tells (by default the cluster
+  schedule's, :func:`~cogmap_core.schedule.schedule_shared`: parameters that differ only in
+  ``T_interval`` and ``T_total`` share the events before their schedules part;
+  :func:`identical_params` shares them only between identical parameters). The map is the same
+  either way.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_log import EventLog
 from cogmap_core.events import MapEvent
+from cogmap_core.schedule import schedule_shared
 
 #: Events applied between two checks for a newer request during a rebuild.
 REBUILD_CHUNK = 1000
@@ -109,7 +112,7 @@ def build_map(
     interrupted: Interrupted | None = None,
     events: Sequence[MapEvent] | None = None,
     checkpoints: CheckpointStore | None = None,
-    divergence: Divergence = identical_params,
+    divergence: Divergence = schedule_shared,
     finish_time: float | None = None,
 ) -> tuple[CognitiveMap, int]:
     """Build ``task``'s map from ``log``; return it and the events it resumed after (0: none).

@@ -8,7 +8,7 @@ everything else about a parameter, once:
   advanced panel, place);
 - whether the paper fixes it (the five of the paper: alpha, beta, delta, T_interval, T_total);
 - whether it is a threshold of the loop-closure clustering (it acts on a map only through the
-  cluster schedule, :mod:`app.server.schedule`);
+  cluster schedule, :mod:`cogmap_core.schedule`);
 - its dedicated option of ``cogmap run`` / ``cogmap serve`` if it has one (the others are given
   with ``--param NAME=VALUE``);
 - which of the three maps it affects (a change of any other parameter leaves a map as it is, so

@@ -20,8 +20,6 @@ import numpy as np
 import pytest
 
 from app.server import rebuild
-from app.server.rebuild import BuildTask, build_map_resumed
-from app.server.schedule import schedule_divergence
 from cogmap_core import compiled_loop, compiled_replay, map_build, numba_cache
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
@@ -29,6 +27,8 @@ from cogmap_core.errors import EventError
 from cogmap_core.event_file import events_to_columns, load_event_file
 from cogmap_core.event_log import EventLog
 from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentVertex
+from cogmap_core.map_build import BuildTask, build_map
+from cogmap_core.schedule import schedule_divergence
 from tests.conftest import DATA
 
 pytestmark = pytest.mark.skipif(
@@ -227,9 +227,7 @@ def test_a_schedule_change_resumes_from_the_last_cluster_it_shares(logs) -> None
     store: dict = {}
     resumed_after = []
     for mode in (MapMode.SCENE_INTEGRATION, MapMode.COMPACT):
-        first, _ = build_map_resumed(
-            log, BuildTask(mode, MapParams(), log.frames, True), None, None, store
-        )
+        first, _ = build_map(log, BuildTask(mode, MapParams(), log.frames, True), None, None, store)
         closed = [
             c for c in first.clusters if c.closed_time is not None and c.closed_time < log.end_time
         ]
@@ -248,34 +246,28 @@ def test_a_schedule_change_resumes_from_the_last_cluster_it_shares(logs) -> None
                 != params
             ):
                 held = []
-            cmap, resumed = build_map_resumed(log, task, None, None, store)
+            cmap, resumed = build_map(log, task, None, None, store)
             assert resumed == (held[-1] if held else 0)
             assert_same_state(cmap, python_map(log, mode, params))
             resumed_after.append(resumed)
             previous = params
         assert store[mode].states == []  # none kept after a change of more than the schedule
         params = previous.with_changes(t_total=20.0)
-        cmap, resumed = build_map_resumed(
-            log, BuildTask(mode, params, log.frames, True), None, None, store
-        )
+        cmap, resumed = build_map(log, BuildTask(mode, params, log.frames, True), None, None, store)
         assert resumed == 0 and store[mode].states  # kept again
     assert resumed_after[0] > log.event_count // 2 and resumed_after[3] > log.event_count // 2
-    assert (
-        build_map_resumed(log, BuildTask(mode, MapParams(t_total=20.0), log.frames, True))[1] == 0
-    )
+    assert build_map(log, BuildTask(mode, MapParams(t_total=20.0), log.frames, True))[1] == 0
 
 
 def test_kept_states_stay_few_and_still_resume_exactly(logs, monkeypatch) -> None:
     monkeypatch.setattr(map_build, "MAX_CHECKPOINTS", 3)  # (where the build reads it)
     log = logs["figure_eight_3laps"]
     store: dict = {}
-    build_map_resumed(
-        log, BuildTask(MapMode.COMPACT, MapParams(), log.frames, True), None, None, store
-    )
+    build_map(log, BuildTask(MapMode.COMPACT, MapParams(), log.frames, True), None, None, store)
     kept = [k for k, _ in store[MapMode.COMPACT].states]
     assert 2 <= len(kept) <= 3 and kept == sorted(kept)
     params = MapParams(t_total=20.0)
-    cmap, resumed = build_map_resumed(
+    cmap, resumed = build_map(
         log, BuildTask(MapMode.COMPACT, params, log.frames, True), None, None, store
     )
     assert resumed in kept and resumed > 0
@@ -289,11 +281,11 @@ def test_without_numba_installed_rebuilds_use_the_python_code() -> None:
         "from cogmap_core import compiled_replay as c\n"
         "from cogmap_core.event_log import EventLog\n"
         "from cogmap_core.event_file import load_event_file\n"
-        "from app.server.rebuild import BuildTask, build_map\n"
+        "from cogmap_core.map_build import BuildTask, build_map\n"
         "from cogmap_core.cognitive_map import MapMode\n"
         "from cogmap_core.config import MapParams\n"
         f"log = EventLog.from_recording(load_event_file({recording!r}))\n"
-        "cmap = build_map(log, BuildTask(MapMode.COMPACT, MapParams(), log.frames, True))\n"
+        "cmap, _ = build_map(log, BuildTask(MapMode.COMPACT, MapParams(), log.frames, True))\n"
         "print(c.available(), c.unavailable_reason(), cmap.num_vertices)\n"
     )
     out = subprocess.run(
@@ -315,6 +307,6 @@ def test_a_newer_request_stops_a_compiled_build_between_optimisations(logs) -> N
         return len(asked) > 5
 
     with pytest.raises(rebuild.Abandoned):
-        build_map_resumed(log, task, interrupted)
+        build_map(log, task, interrupted)
     assert len(asked) == 6  # asked again at events the Python code applied, not only per chunk
     assert log.event_count < rebuild.COMPILED_CHUNK

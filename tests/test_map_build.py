@@ -61,7 +61,8 @@ def test_the_session_s_rebuild_is_the_one_build_path(log: EventLog) -> None:
         assert maps[mode].clusters[-1].closed_time == log.end_time == log.frame_time[-1]
     # the app's names are the same build (with the cluster schedule's resume rule)
     assert rebuild.BuildTask is BuildTask and rebuild.Abandoned is Abandoned
-    same(rebuild.build_map(log, BuildTask(MapMode.COMPACT, CHANGED, log.frames, True)),
+    assert rebuild.build_map is build_map
+    same(rebuild.build_map(log, BuildTask(MapMode.COMPACT, CHANGED, log.frames, True))[0],
          maps[MapMode.COMPACT])  # fmt: skip
 
 
@@ -102,7 +103,7 @@ def test_each_caller_keeps_its_end_of_data_time(log: EventLog) -> None:
 
 
 @pytest.mark.skipif(not compiled_replay.available(), reason="checkpoints need the compiled replay")
-def test_without_a_rule_only_the_same_parameters_resume(log: EventLog) -> None:
+def test_the_identical_params_rule_resumes_only_the_same_parameters(log: EventLog) -> None:
     store: map_build.CheckpointStore = {}
     mode = MapMode.SCENE_INTEGRATION
     first, resumed = build_map(
@@ -117,12 +118,16 @@ def test_without_a_rule_only_the_same_parameters_resume(log: EventLog) -> None:
     same(again, first)
     other = MapParams(t_total=20.0)  # the schedule's rule would resume it; this one does not
     assert identical_params(log, log.event_count, MapParams(), other) is None
-    built, resumed = build_map(log, BuildTask(mode, other, log.frames, True), None, None, store)
+    built, resumed = build_map(
+        log, BuildTask(mode, other, log.frames, True), None, None, store, identical_params
+    )
     assert resumed == 0 and store[mode].states == []  # no start: none kept
     expected = python_map(log, mode, other, log.frames)
     expected.finish(log.end_time)
     same(built, expected)
-    built, resumed = build_map(log, BuildTask(mode, other, log.frames, True), None, None, store)
+    built, resumed = build_map(
+        log, BuildTask(mode, other, log.frames, True), None, None, store, identical_params
+    )
     assert resumed == 0 and store[mode].states  # kept again
 
 

@@ -19,7 +19,6 @@ import app.server.replay as replay
 from app.server.panels.layers import MODE_NAMES
 from app.server.params import ADVANCED_SLIDERS, ALL_SLIDERS, SLIDERS, SliderSpec, check_spec
 from app.server.replay_rebuilds import PARAMS_USED
-from app.server.schedule import SCHEDULE_PARAMS
 from app.summary import MAP_ORDER
 from cogmap_core import config, slam, sweep
 from cogmap_core.cognitive_map import MapMode, MapSet
@@ -34,6 +33,7 @@ from cogmap_core.parameter_table import (
     PARAMETERS_USED,
     flag_name,
 )
+from cogmap_core.schedule import SCHEDULE_PARAMS
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ("alpha", "beta", "delta", "t_interval", "t_total")

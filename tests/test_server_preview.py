@@ -17,12 +17,12 @@ import app.server.preview as preview_module
 from app.server.panels.parameters import built_content
 from app.server.preview import compact_preview, make_preview, preview_difference
 from app.server.replay_state import RebuildRecord
-from app.server.schedule import same_schedule
 from cogmap_core.cognitive_map import CognitiveMap, EdgeKind, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.events import CreateVertex, MapEvent, Odometry
 from cogmap_core.geometry import compose_scalar, inverse_scalar
 from cogmap_core.neighborhood_fields import is_novel
+from cogmap_core.schedule import same_schedule
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
 from tests.test_server_support import assert_same_map, running_app

@@ -24,12 +24,12 @@ from app.server.rebuild import (
     ProcessBuilder,
     ThreadBuilder,
 )
-from app.server.schedule import same_schedule
 from cogmap_core.clustering import LoopClosureClusterer, cluster_schedule
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_log import EventLog
 from cogmap_core.events import LinkToVertex, MapEvent, Odometry
+from cogmap_core.schedule import same_schedule
 from cogmap_core.slam import SlamSession
 from tests import test_server_support as support
 from tests.test_server_support import assert_same_map, running_app

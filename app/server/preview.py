@@ -26,20 +26,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.server.schedule import SCHEDULE_PARAMS
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.geometry import compose, compose_scalar, inverse_scalar
 from cogmap_core.map_graph import EdgeKind
 from cogmap_core.neighborhood_fields import is_novel
 from cogmap_core.parameter_table import MAP_PARAMETERS, PARAMETERS_USED
+from cogmap_core.schedule import SCHEDULE_PARAMS
 
 #: A map whose last build took longer than this (s) is previewed while it is rebuilt (the
 #: issue's 200 ms); a map never built before is always previewed.
 PREVIEW_AFTER_S = 0.2
 #: The neighborhood field's parameters (the paper's that only the compact map uses): a change of
 #: only these previews the compact map from the standard map. (A change of only the cluster
-#: schedule's, :data:`~app.server.schedule.SCHEDULE_PARAMS`, previews the map shown.)
+#: schedule's, :data:`~cogmap_core.schedule.SCHEDULE_PARAMS`, previews the map shown.)
 FIELD_PARAMS = frozenset(
     p.name for p in MAP_PARAMETERS if p.paper and p.maps == frozenset({MapMode.COMPACT})
 )

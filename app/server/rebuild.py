@@ -12,7 +12,7 @@ result -- every map is exactly what ``CognitiveMap(mode, params)`` fed the same 
   the browsers. A newer request abandons the builds in flight within one chunk of events.
 - :class:`MapCache`: maps built for parameters met before (a slider moved back, "reset to paper
   values") are kept and reused.
-- :func:`~app.server.schedule.same_schedule`: the clustering thresholds ``T_interval`` and
+- :func:`~cogmap_core.schedule.same_schedule`: the clustering thresholds ``T_interval`` and
   ``T_total`` act on a map only through the schedule of loop-closure clusters (which links form
   a cluster, at which event it closes and the map is optimised). When that schedule over the
   events so far is the same for the old and the new values, the map is the same and is kept.
@@ -20,7 +20,7 @@ result -- every map is exactly what ``CognitiveMap(mode, params)`` fed the same 
 :class:`ThreadBuilder` does the same work on the calling thread (no worker processes). Each map
 is built by :func:`cogmap_core.map_build.build_map`, the path ``SlamSession.rebuild`` takes too
 (interrupted between chunks of events, resumed from the states kept at its clusters' closes when
-only ``T_interval`` and ``T_total`` changed: :func:`schedule_shared`).
+only ``T_interval`` and ``T_total`` changed: :func:`~cogmap_core.schedule.schedule_shared`).
 """
 
 from __future__ import annotations
@@ -43,8 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from app.server.schedule import SCHEDULE_PARAMS, schedule_divergence
-from cogmap_core import compiled_replay, map_build
+from cogmap_core import compiled_replay
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.event_log import EventLog
@@ -58,6 +57,7 @@ from cogmap_core.map_build import (  # re-exported: the rebuilds' names
     Checkpoints,
     CheckpointStore,
     Interrupted,
+    build_map,
 )
 
 #: How often (s) a waiting builder checks whether its request was superseded.
@@ -76,53 +76,6 @@ class Built:
     cmap: CognitiveMap
     compute_s: float
     resumed_at: int = 0
-
-
-def schedule_shared(log: EventLog, end: int, old: MapParams, new: MapParams) -> int | None:
-    """How many of the first ``end`` events maps built with ``old`` and ``new`` apply alike.
-
-    The rebuilds' :data:`~cogmap_core.map_build.Divergence` rule: the clustering thresholds
-    ``T_interval`` and ``T_total`` act on a map only through its cluster schedule, so for
-    parameters that differ in nothing else the maps agree up to where the schedules part
-    (:func:`~app.server.schedule.schedule_divergence`); any other change is no start at all
-    (None).
-    """
-    changed = {k for k, v in old.to_dict().items() if getattr(new, k) != v}
-    if not changed <= SCHEDULE_PARAMS:
-        return None
-    return schedule_divergence(log, end, old, new)
-
-
-def build_map(
-    log: EventLog,
-    task: BuildTask,
-    interrupted: Interrupted | None = None,
-    events: Sequence[MapEvent] | None = None,
-    checkpoints: CheckpointStore | None = None,
-) -> CognitiveMap:
-    """What ``SlamSession.rebuild`` does for one map, abandoned when ``interrupted()`` says so.
-
-    :func:`cogmap_core.map_build.build_map` with the cluster schedule's rule
-    (:func:`schedule_shared`): a build whose parameters differ from those of its map's previous
-    build only in ``T_interval`` and ``T_total`` resumes from the latest state kept in
-    ``checkpoints`` before its cluster schedule differs. The map is the same either way.
-
-    Raises:
-        Abandoned: ``interrupted()`` returned True between two chunks of events.
-
-    """
-    return build_map_resumed(log, task, interrupted, events, checkpoints)[0]
-
-
-def build_map_resumed(
-    log: EventLog,
-    task: BuildTask,
-    interrupted: Interrupted | None = None,
-    events: Sequence[MapEvent] | None = None,
-    checkpoints: CheckpointStore | None = None,
-) -> tuple[CognitiveMap, int]:
-    """:func:`build_map`, and the number of events it resumed after (0: from the first)."""
-    return map_build.build_map(log, task, interrupted, events, checkpoints, schedule_shared)
 
 
 # ---------------------------------------------------------------------------------- cache
@@ -195,7 +148,7 @@ class ThreadBuilder:
             self._log, self._checkpoints = log, {}
         for task in tasks:
             started = time.perf_counter()
-            cmap, resumed = build_map_resumed(log, task, interrupted, None, self._checkpoints)
+            cmap, resumed = build_map(log, task, interrupted, None, self._checkpoints)
             yield Built(task, cmap, time.perf_counter() - started, resumed)
 
     def prepare(self, log: EventLog) -> None:
@@ -240,7 +193,7 @@ def _worker_main(conn: multiprocessing.connection.Connection) -> None:
             _, task_id, task = message
             started = time.perf_counter()
             try:
-                cmap, resumed = build_map_resumed(log, task, cancelled, events, checkpoints)
+                cmap, resumed = build_map(log, task, cancelled, events, checkpoints)
             except Abandoned:
                 conn.send(("abandoned", task_id))
                 continue
@@ -538,9 +491,7 @@ __all__ = [
     "ProcessBuilder",
     "ThreadBuilder",
     "build_map",
-    "build_map_resumed",
     "make_builder",
-    "schedule_shared",
 ]
 
 

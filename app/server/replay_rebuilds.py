@@ -26,10 +26,10 @@ from app.server import preview as preview_module
 from app.server.preview import Preview, make_preview, preview_difference
 from app.server.rebuild import Abandoned, Builder, BuildTask, MapCache
 from app.server.replay_state import PlaybackState, RebuildRecord
-from app.server.schedule import same_schedule
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
 from cogmap_core.parameter_table import PARAMETERS_USED
+from cogmap_core.schedule import same_schedule
 from cogmap_core.slam import ALL_MODES, SlamSession
 
 if TYPE_CHECKING:

@@ -1,10 +1,11 @@
-"""Whether a change of the clustering thresholds changes a map (the rebuild planner's shortcut).
+"""What a change of the clustering thresholds does to a map (the rebuilds' shortcuts).
 
 ``T_interval`` and ``T_total`` act on a map only through the schedule of loop-closure clusters
 (:func:`~cogmap_core.clustering.cluster_schedule`: which links form a cluster, at which event it
 closes and the map is optimised). When that schedule over the events so far is the same for the
 old and the new values, the map is the same and is kept (:func:`same_schedule`); otherwise the
-maps agree up to where the schedules part (:func:`schedule_divergence`).
+maps agree up to where the schedules part (:func:`schedule_divergence`), from where a build
+resumes (:func:`schedule_shared`, the rule :func:`cogmap_core.map_build.build_map` follows).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ def same_schedule(
     True only when the two differ in nothing but ``t_interval``/``t_total`` and those give the same
     cluster schedule over the first ``frames`` frames.
     """
-    changed = {k for k, v in old.to_dict().items() if getattr(new, k) != v}
+    changed = _changed(old, new)
     if not changed or not changed <= SCHEDULE_PARAMS:
         return not changed
     end = int(log.frame_end[frames - 1]) if frames else 0
@@ -65,4 +66,22 @@ def schedule_divergence(log: EventLog, end: int, old: MapParams, new: MapParams)
     return end
 
 
-__all__ = ["SCHEDULE_PARAMS", "same_schedule", "schedule_divergence"]
+def schedule_shared(log: EventLog, end: int, old: MapParams, new: MapParams) -> int | None:
+    """How many of the first ``end`` events maps built with ``old`` and ``new`` apply alike.
+
+    The builds' :data:`~cogmap_core.map_build.Divergence` rule: for parameters that differ only
+    in ``T_interval`` and ``T_total``, the maps agree up to where the schedules part
+    (:func:`schedule_divergence`); any other change is no start at all (None).
+    """
+    changed = _changed(old, new)
+    if not changed <= SCHEDULE_PARAMS:
+        return None
+    return schedule_divergence(log, end, old, new)
+
+
+def _changed(old: MapParams, new: MapParams) -> set[str]:
+    """The names of the parameters that differ."""
+    return {k for k, v in old.to_dict().items() if getattr(new, k) != v}
+
+
+__all__ = ["SCHEDULE_PARAMS", "same_schedule", "schedule_divergence", "schedule_shared"]
