@@ -41,9 +41,7 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 from collections.abc import Callable, Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -113,7 +111,7 @@ from cogmap_core.events import (
     SetCurrentVertex,
 )
 from cogmap_core.geometry import TWO_PI
-from cogmap_core.numba_cache import choose_cache
+from cogmap_core.numba_cache import cached_njit
 
 #: Set to "0" to never use the compiled replay (e.g. to time the Python path).
 ENV_SWITCH = "COGMAP_COMPILED_REPLAY"
@@ -127,19 +125,12 @@ def _load() -> None:
     """Import numba, compile the loop (or load it from the cache) and check it (once)."""
     global _AVAILABLE, _REASON
     _AVAILABLE = False
-    cache = choose_cache(
-        Path(__file__).resolve().parent / "__pycache__",
-        os.environ,
-        "numba" in sys.modules,
-        Path(os.path.expanduser("~")),
-    )
     try:
-        import numba
+        jit = cached_njit(__file__)
     except ImportError:
         _REASON = "numba is not installed"
         return
     try:
-        jit = numba.njit(cache=cache)
         loop.compile_all(jit)
         _AVAILABLE = _self_check()
         if not _AVAILABLE:
@@ -454,7 +445,6 @@ __all__ = [
     "ENV_SWITCH",
     "CompiledReplay",
     "available",
-    "choose_cache",  # re-exported: cogmap_core.frontend.compiled imports it from here
     "replay",
     "unavailable_reason",
 ]

@@ -1,4 +1,4 @@
-"""Where numba caches compiled code (the compiled replay's, :mod:`cogmap_core.compiled_replay`).
+"""Where numba caches compiled code (the compiled replay's and the front end's loops).
 
 ``NUMBA_CACHE_DIR`` when set; else numba's own choice (``__pycache__`` beside the source) when
 that is writable; else ``$XDG_CACHE_HOME/cogmap/numba`` or ``~/.cache/cogmap/numba``; caching is
@@ -7,9 +7,12 @@ off when none of them is writable.
 
 from __future__ import annotations
 
+import os
+import sys
 import tempfile
 from collections.abc import Callable, MutableMapping
 from pathlib import Path
+from typing import Any
 
 
 def writable_folder(folder: Path) -> bool:
@@ -50,4 +53,22 @@ def choose_cache(
     return False  # nowhere to write (or numba already set up otherwise): compile every time
 
 
-__all__ = ["choose_cache", "writable_folder"]
+def cached_njit(source_file: str) -> Any:
+    """``numba.njit`` caching where :func:`choose_cache` says, for the loops of ``source_file``.
+
+    Raises:
+        ImportError: numba is not installed.
+
+    """
+    cache = choose_cache(
+        Path(source_file).resolve().parent / "__pycache__",
+        os.environ,
+        "numba" in sys.modules,
+        Path(os.path.expanduser("~")),
+    )
+    import numba
+
+    return numba.njit(cache=cache)
+
+
+__all__ = ["cached_njit", "choose_cache", "writable_folder"]

@@ -12,15 +12,13 @@ uses it).
 numba is optional: without it, when compiling fails, with ``COGMAP_COMPILED_FRONTEND=0``, or
 in a program that prefers the numpy code (:func:`prefer_compiled`), :func:`kernels` returns
 None and the front end runs its numpy code (the same results). Compiled code is cached on disk
-where :func:`cogmap_core.compiled_replay.choose_cache` says.
+where :func:`cogmap_core.numba_cache.choose_cache` says.
 """
 
 from __future__ import annotations
 
 import math
 import os
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -304,18 +302,10 @@ def kernels() -> SimpleNamespace | None:
 
 
 def _load() -> SimpleNamespace | None:
-    from cogmap_core.compiled_replay import choose_cache
+    from cogmap_core.numba_cache import cached_njit
 
-    cache = choose_cache(
-        Path(__file__).resolve().parent / "__pycache__",
-        os.environ,
-        "numba" in sys.modules,
-        Path(os.path.expanduser("~")),
-    )
     try:
-        import numba
-
-        jit = numba.njit(cache=cache)
+        jit = cached_njit(__file__)
         compiled = {name: jit(globals()[name]) for name in _COMPILED}
         globals().update(compiled)  # the loops call each other by their module names
         match = jit(_match_pairs)
