@@ -557,6 +557,10 @@ class CognitiveMap:
         ):
             raise StateError("counters do not match the graph")
 
+    def place_robot(self, vid: int, offset: tuple[float, float, float]) -> None:
+        """Put the robot at ``offset`` in the frame of live vertex ``vid`` (a map made by hand)."""
+        self._set_current(vid, offset)
+
     def _set_current(self, vid: int, offset: tuple[float, float, float] | list[float]) -> None:
         self._current = vid
         self._accum = [float(offset[0]), float(offset[1]), wrap_scalar(float(offset[2]))]

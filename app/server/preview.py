@@ -154,9 +154,8 @@ def compact_preview(standard: CognitiveMap, params: MapParams) -> CognitiveMap:
     current = standard.current_vertex
     if current >= 0 and rep[current] >= 0:
         kept = int(rep[current])
-        preview._current = kept
-        robot = standard.current_pose()
-        preview._accum = list(_relative(tuple(graph.pose[kept].tolist()), tuple(robot.tolist())))
+        robot = tuple(standard.current_pose().tolist())
+        preview.place_robot(kept, _relative(tuple(graph.pose[kept].tolist()), robot))
     preview.optimizations = list(standard.optimizations)
     return preview
 
