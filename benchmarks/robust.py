@@ -23,7 +23,10 @@ The last line reads ``robust: worst ATE ratio to the outlier-free optimum X over
 logs`` (a: to the outlier-free optimum's poses, against the outlier-free ATE floor of 0.05 m;
 b: to the map from the true links alone; c: none; d: to the clean run).
 
-Usage: ``python benchmarks/robust.py [--parts a,b,c,d] [--quick]``.
+(b) takes ``--log-seeds`` (default 1,2,3, the seeds the log defaults were chosen on): the
+seeds 4,5,6 are the held-back logs, generated alike.
+
+Usage: ``python benchmarks/robust.py [--parts a,b,c,d] [--quick] [--log-seeds 1,2,3]``.
 """
 
 from __future__ import annotations
@@ -135,11 +138,20 @@ def part_a(quick: bool) -> list[float]:
 
 
 # ---------------------------------------------------------------------------------- (b) logs
-LOG_GRID = ((1, "medium", 0.1), (2, "high", 0.3), (3, "extreme", 0.5))
-"""(seed, drift level, false share) of the generated logs of every pattern."""
+LOG_LEVELS = (("medium", 0.1), ("high", 0.3), ("extreme", 0.5))
+"""(drift level, false share) of the generated logs, taken in turn by the seeds."""
+LOG_SEEDS = (1, 2, 3)
+"""The seeds the defaults were chosen on; others (``--log-seeds 4,5,6``) are held back."""
 
 
-def generated_logs(folder: Path, quick: bool) -> list[tuple[str, Path]]:
+def log_grid(seeds: tuple[int, ...]) -> list[tuple[int, str, float]]:
+    """(seed, drift level, false share) of every pattern's logs: the k-th seed, the k-th level."""
+    return [(seed, *LOG_LEVELS[k % len(LOG_LEVELS)]) for k, seed in enumerate(seeds)]
+
+
+def generated_logs(
+    folder: Path, quick: bool, seeds: tuple[int, ...] = LOG_SEEDS
+) -> list[tuple[str, Path]]:
     """The generated logs (written once into ``folder``): six patterns x three seeds."""
     from cogmap_core.datasets.log_generator import LogGeneratorConfig, generate_log
     from cogmap_core.datasets.log_routes import PATTERNS
@@ -148,7 +160,7 @@ def generated_logs(folder: Path, quick: bool) -> list[tuple[str, Path]]:
     folder.mkdir(parents=True, exist_ok=True)
     out = []
     for pattern in PATTERNS[:2] if quick else PATTERNS:
-        for seed, drift, false_share in LOG_GRID:
+        for seed, drift, false_share in log_grid(seeds):
             prefix = folder / f"{pattern}_{seed}_{drift}_{false_share:g}"
             path = Path(f"{prefix}_Input.txt")
             if not path.exists():
@@ -170,7 +182,7 @@ def build_log_maps(reader: object, params: MapParams) -> tuple[object, float]:
     return session, time.perf_counter() - started
 
 
-def part_b(quick: bool) -> list[float]:
+def part_b(quick: bool, seeds: tuple[int, ...] = LOG_SEEDS) -> list[float]:
     """Generated logs: each map against the map of the true links alone and dead reckoning."""
     from cogmap_core.datasets.cache import cache_dir
     from cogmap_core.sources.detect import LogOptions, open_source
@@ -195,7 +207,7 @@ def part_b(quick: bool) -> list[float]:
             + " | ".join(f"{m.value[:8]:>8} ATE  true  ratio     V compl  corr" for m in MapMode)
         )
         worst: list[float] = []
-        for name, path in generated_logs(cache_dir() / "bench" / "logs", quick):
+        for name, path in generated_logs(cache_dir() / "bench" / "logs", quick, seeds):
             config = LogSourceConfig()
             reader = open_source(path, "tuc", log=LogOptions(config=config))
             assert isinstance(reader, LogReader)
@@ -362,10 +374,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--parts", default="a,b,c,d", help="which parts to run (a,b,c,d)")
     parser.add_argument("--quick", action="store_true", help="fewer cases per part")
+    parser.add_argument(
+        "--log-seeds",
+        default=",".join(map(str, LOG_SEEDS)),
+        help="(b) the generated logs' seeds, drift medium/high/extreme in turn; 4,5,6: held back",
+    )
     args = parser.parse_args()
+    seeds = tuple(int(s) for s in args.log_seeds.split(","))
     parts: dict[str, Callable[[bool], list[float]]] = {
         "a": part_a,
-        "b": part_b,
+        "b": lambda quick: part_b(quick, seeds),
         "c": part_c,
         "d": part_d,
     }
