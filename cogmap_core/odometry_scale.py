@@ -35,6 +35,7 @@ from cogmap_core.edge_noise import (
     ODOMETRY_SIGMA_PER_METRE,
     ODOMETRY_SIGMA_PER_RADIAN,
 )
+from cogmap_core.evaluation import dead_reckoning
 
 #: The stiffest odometry the estimate may give: sigmas x 0.3 (variance x 0.09).
 MIN_SCALE = 0.3
@@ -75,10 +76,8 @@ def innovation_ratios(
     """
     t, v, w = odometry[:, 0], odometry[:, 1], odometry[:, 2]
     dt = np.diff(t, prepend=t[0])
-    heading = np.cumsum(w * dt)
-    mid = heading - w * dt / 2  # each step driven at its mean heading
-    x = np.cumsum(v * dt * np.cos(mid))
-    y = np.cumsum(v * dt * np.sin(mid))
+    poses = dead_reckoning(v * dt, w * dt)  # as the map integrates odometry
+    x, y = poses[:, 0], poses[:, 1]
     ds, dth = np.abs(v * dt), np.abs(w * dt)
     # the model's variances per step: heading (per metre driven and per radian turned), position
     heading_var = ODOMETRY_HEADING_PER_METRE**2 * ds + ODOMETRY_SIGMA_PER_RADIAN**2 * dth
