@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cogmap_core import compiled_loop as loop
+from cogmap_core import compiled_search
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.compiled_loop import (
     F_ACC0,
@@ -132,6 +133,7 @@ def _load() -> None:
         return
     try:
         loop.compile_all(jit)
+        compiled_search.compile_all(jit)
         _AVAILABLE = _self_check()
         if not _AVAILABLE:
             _REASON = "compiled arithmetic differs from CPython's"
@@ -222,6 +224,7 @@ class CompiledReplay:
         self._hist = np.empty((1, 3))
         #: events the map's Python code applied (the compiled loop stopped before them)
         self.escapes = 0
+        self._search = compiled_search.PathSearch(cmap.graph)
 
     def apply(
         self,
@@ -265,10 +268,21 @@ class CompiledReplay:
                 event = SetCurrentVertex(t, int(ref[k]), float(value0[k]))
             else:
                 raise ValueError(f"unknown event kind {what}")
-            self.cmap.apply(event)
+            self._apply_python(event)
             if after_python is not None:
                 after_python(k)
             k += 1
+
+    def _apply_python(self, event: MapEvent) -> None:
+        """The map's Python code applies ``event``, its gate searching paths compiled."""
+        graph = self.cmap.graph
+        if self._search.graph is not graph:
+            self._search = compiled_search.PathSearch(graph)
+        graph.path_search = self._search
+        try:
+            self.cmap.apply(event)
+        finally:
+            graph.path_search = None
 
     # ------------------------------------------------------------------ state in and out
     def _sync_table(self) -> None:

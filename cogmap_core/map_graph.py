@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any
@@ -169,6 +169,12 @@ class MapGraph:
         self.num_vertices = 0
         self.num_edges = 0
         self.num_loop_edges = 0
+        #: bumped whenever an edge's ends change (a merge, a state loaded): what an index of the
+        #: graph's structure checks to know it must be rebuilt (not saved with the graph)
+        self.revision = 0
+        #: an exact, faster :meth:`graph_distance_below` (the compiled replay installs
+        #: :class:`~cogmap_core.compiled_search.PathSearch` while it replays), or None
+        self.path_search: Callable[[int, int, float], bool] | None = None
 
     # ------------------------------------------------------------------ vertices
     def new_id(self, vertex_id: int, time: float, view: int) -> None:
@@ -293,6 +299,7 @@ class MapGraph:
         that stood for ``removed`` stands for ``kept`` afterwards.
         """
         inv_offset = inverse_scalar(offset)
+        self.revision += 1
         kept_adjacency = self.adjacency[kept]
         for other, k in list(self.adjacency[removed].items()):
             del self.adjacency[removed][other]
@@ -346,6 +353,7 @@ class MapGraph:
 
         """
         n, m = int(state["num_ids"]), int(state["num_edges_total"])
+        self.revision += 1
         for name in (*VERTEX_ARRAYS, *EDGE_ARRAYS):
             like = getattr(self, name)  # dtype and row shape
             rows = n if name in VERTEX_ARRAYS else m
@@ -372,8 +380,11 @@ class MapGraph:
         """Whether a path of edges from ``source`` to ``target`` is shorter than ``limit`` (m).
 
         Dijkstra over measured edge lengths, stopped at ``limit``: cheap when the answer is no
-        path that short, which is what a consistency test needs to know.
+        path that short, which is what a consistency test needs to know. With a
+        :attr:`path_search` installed, that answers (the same answer, compiled).
         """
+        if self.path_search is not None:
+            return self.path_search(source, target, limit)
         if source == target:
             return limit > 0
         best = {source: 0.0}
