@@ -475,6 +475,10 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "num_vertices",
         "num_edges",
         "num_loop_edges",
+        # not saved, on purpose: a cache key for indexes of the structure (a loaded graph bumps
+        # it) and the compiled search the compiled replay installs only while it replays
+        "revision",
+        "path_search",
     },  # fmt: skip
     SceneIntegration: {"open", "pending", "_known", "_relocalised_at"},
     EventLog: {
