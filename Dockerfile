@@ -42,8 +42,9 @@ USER cogmap:cogmap
 # Generate the default dataset into $COGMAP_CACHE at build time: the container starts at once.
 RUN cogmap dataset path
 # Compile the map replay, its path search and the front end's loops (numba:
-# cogmap_core/compiled_replay.py, compiled_search.py, frontend/compiled.py) into that cache as that user too: neither the first parameter
-# change nor the first frame waits for them (the installed code itself is read-only).
+# cogmap_core/compiled_replay.py, compiled_search.py, frontend/compiled.py) into that cache as
+# that user too: neither the first parameter change nor the first frame waits for them (the
+# installed code itself is read-only).
 RUN python -c "from cogmap_core import compiled_replay as c; assert c.available(), c.unavailable_reason()" \
  && python -c "from cogmap_core.frontend.compiled import kernels; assert kernels() is not None"
 
