@@ -50,7 +50,6 @@ from cogmap_core.config import MapParams
 from cogmap_core.errors import EventError, StateError
 from cogmap_core.events import CreateVertex, LinkToVertex, MapEvent, Odometry, SetCurrentVertex
 from cogmap_core.geometry import TWO_PI, compose, compose_scalar, inverse_scalar, wrap_scalar
-from cogmap_core.loop_revision import ContestedClusters
 from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot
 from cogmap_core.map_modes import ALL_MODES, MapMode
 from cogmap_core.neighborhood_fields import is_novel, neighborhood_field
@@ -163,7 +162,6 @@ class CognitiveMap:
         self._edges_at_last_optimization = 0
         self._optimized_once = False
         self.optimizations: list[OptimizationRecord] = []
-        self.contested = ContestedClusters()
         self.refused: list[RelocalisationCheck] = []
         self._hist_time: list[float] = []
         self._hist_vertices: list[int] = []
@@ -466,8 +464,7 @@ class CognitiveMap:
 
         ``mode`` and ``params`` (:meth:`MapParams.to_dict`), the parts' own state (``graph``,
         ``clusterer``, ``integration``, ``gate``: their ``state_dict()``), the records
-        (``optimizations``, ``refused``: lists of their ``state_dict()``), the ``contested``
-        clusters' edge ids (:mod:`~cogmap_core.loop_revision`), ``counters``, the
+        (``optimizations``, ``refused``: lists of their ``state_dict()``), ``counters``, the
         robot's state (``robot``: ``current`` vertex, ``accum``-ulated motion in its frame,
         distance ``travelled`` since, ``last_rotation``, ``last_time``, ``last_link`` as
         ``[time, target, accepted]`` or None), when it last optimised, and its ``size_history``
@@ -483,7 +480,6 @@ class CognitiveMap:
             "integration": self.integration.state_dict(),
             "gate": self.gate.state_dict(),
             "optimizations": [r.state_dict() for r in self.optimizations],
-            "contested": self.contested.state_dict(),
             "refused": [c.state_dict() for c in self.refused],
             "counters": asdict(self.counters),
             "robot": {
@@ -528,7 +524,6 @@ class CognitiveMap:
         self.integration.load_state(state["integration"])
         self.gate.load_state(state["gate"])
         self.optimizations = [OptimizationRecord.from_state(r) for r in state["optimizations"]]
-        self.contested.load_state(state.get("contested", []))  # absent before it existed
         self.refused = [RelocalisationCheck.from_state(c) for c in state["refused"]]
         self.counters = MapCounters(**state["counters"])
         self._check_counters()
@@ -605,9 +600,6 @@ class CognitiveMap:
         pose_graph = self.to_pose_graph()
         if pose_graph.num_edges == 0:
             return None
-        model = self.params.loop_closure_model()
-        accepted = pose_graph.loop_closures() & ~new_edges
-        accepted &= ~rejected_loop_closures(pose_graph, model)
         started = wallclock.perf_counter()
         result = optimize_pose_graph(
             pose_graph,
@@ -615,15 +607,11 @@ class CognitiveMap:
                 huber_scale=self.params.huber_scale,
                 initialization="none",
                 function_tolerance=1e-5,
-                loop_model=model,
+                loop_model=self.params.loop_closure_model(),
             ),
             new_loops=new_edges,
-            suspects=self.contested.suspects(live),
-            clusters=graph.edge_cluster[live],
+            clusters=graph.edge_cluster[live],  # one cluster cannot overrule several
         )
-        if result.rejected is not None:
-            new_loops = pose_graph.loop_closures() & new_edges
-            self.contested.note(live, new_loops, accepted, result.rejected)
         wall = wallclock.perf_counter() - started
         graph.pose[pose_graph.vertex_ids] = result.poses
         integrated = short = 0

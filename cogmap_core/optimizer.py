@@ -47,6 +47,7 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 
 from cogmap_core.ceres_blocks import EdgeGroupCost, Snapshot, SnapshotCost, plan_groups
+from cogmap_core.cluster_consistency import overrules_several
 from cogmap_core.edge_residuals import (
     EdgeLosses,
     EdgeModel,
@@ -268,7 +269,6 @@ def optimize_pose_graph(
     graph: PoseGraph,
     options: OptimizerOptions | None = None,
     new_loops: NDArray[np.bool_] | None = None,
-    suspects: list[NDArray[np.bool_]] | None = None,
     clusters: IntArray | None = None,
 ) -> OptimizationResult:
     """Optimise ``graph`` with Ceres (sparse normal Cholesky, dynamic sparsity).
@@ -284,15 +284,9 @@ def optimize_pose_graph(
     of lower robust cost is kept: the maximum a posteriori choice between "they are false" and
     "the map drifted". Costs are the final kernel's.
 
-    Clusters of loop closures are judged against each other (:mod:`cogmap_core.loop_revision`):
-
-    - ``suspects``: earlier clusters (masks over the edges) whose acceptance may be revised.
-      When new links were rejected, the hypothesis that a suspect is false and they are true
-      is solved as well (the suspect's links dropped for the convex stage, then IRLS with
-      every link free), and kept when its robust cost is lower.
-    - ``clusters``: each edge's cluster id (-1 for odometry). A hypothesis that rejects
-      links of more than one earlier cluster that the start accepted -- one cluster
-      overruling several -- is not taken, whatever its cost.
+    ``clusters``: each edge's cluster id (-1 for odometry). With them, that hypothesis is not
+    taken, whatever its cost, when it has one cluster overrule several
+    (:func:`~cogmap_core.cluster_consistency.overrules_several`).
 
     Raises:
         OptimizationError: non-finite poses or measurements, or Ceres failed.
@@ -443,65 +437,42 @@ def optimize_pose_graph(
         if new_loops is not None:
             rejected = loops & options.loop_model.final_kernel.rejects(_chi2_of(res))
             doubted = loops & new_loops & rejected
-        kernel = options.loop_model.final_kernel
-        at_start = _chi2_of(edge_residuals.at(start[inverse]))
-
-        def hypothesis(convex: NDArray[np.bool_], false: NDArray[np.bool_]) -> float:
-            """Solve, from the start, with ``convex`` links under Huber and ``false`` dropped.
-
-            The other loop closures keep their weights at the start for that convex stage;
-            IRLS then goes on with every loop closure free. Returns the robust cost at the
-            solution (``poses`` holds it); iterations and rounds are counted.
-            """
-            nonlocal iterations, reweightings, termination_of
-            poses[:] = start
-            weights = drop_small(np.where(loops, kernel.weight(at_start), 1.0))
-            weights[false] = 0.0
-            staged: EdgeLosses = [
-                (convex, Kernel("huber", kernel.scale)),
-                (loops & ~convex, Weights(weights)),
-                *rest,
-            ]
-            snapshot.losses = sorted_losses(staged)
-            snapshot.chunk_bytes = [None] * len(bounds)
-            solver_options.max_num_iterations = options.max_iterations
-            first, _, _, _ = solve(None)
-            again = Reweighting(options.loop_model, loops)
-            more, termination_of, _, _ = solve(again)
-            iterations += first + more
-            reweightings += again.rounds
-            return _cost_of(edge_residuals.at(poses[inverse]), final_losses)
-
-        termination_of = termination
-        candidates: list[tuple[NDArray[np.bool_], NDArray[np.bool_]]] = []
         if doubted is not None and doubted.any():
             # The other hypothesis: the new links it rejected are true and the start is only
             # drifted. From the same start, those links are solved under the convex Huber
             # kernel (the other loop closures keep their weights at the start), then IRLS goes
-            # on as before; the solution of lower robust cost is kept.
-            none = np.zeros_like(loops)
-            candidates.append((doubted, none))
-            for group in suspects or ():
-                false = loops & group & ~doubted
-                if false.any() and not kernel.rejects(at_start[false]).all():
-                    # a revision: an earlier cluster the map still accepts is false, and the
-                    # new links it rejected are true
-                    candidates.append((doubted, false))
-        new = loops & (new_loops if new_loops is not None else False)
-        held = loops & ~new & ~kernel.rejects(at_start)
-        for convex, false in candidates:
+            # on as before; the solution of lower robust cost is kept -- unless it has one
+            # cluster overrule several (cogmap_core/cluster_consistency.py).
             kept = poses.copy()
-            other_cost = hypothesis(convex, false)
-            if clusters is not None:
-                # clusters vote: those a hypothesis rejects that the start accepted must not
-                # outnumber those it accepts (the new one, earlier ones it brings back)
-                now = kernel.rejects(_chi2_of(edge_residuals.at(poses[inverse])))
-                displaced = np.unique(clusters[held & ~false & now]).size
-                revived = np.unique(clusters[loops & ~new & ~held & ~now]).size
-                if displaced > revived + int((new & ~now).any()):
-                    other_cost = math.inf
+            poses[:] = start
+            kernel = options.loop_model.final_kernel
+            at_start = _chi2_of(edge_residuals.at(start[inverse]))
+            weights = drop_small(np.where(loops, kernel.weight(at_start), 1.0))
+            convex_losses: EdgeLosses = [
+                (doubted, Kernel("huber", kernel.scale)),
+                (loops & ~doubted, Weights(weights)),
+                *rest,
+            ]
+            snapshot.losses = sorted_losses(convex_losses)
+            snapshot.chunk_bytes = [None] * len(bounds)
+            solver_options.max_num_iterations = options.max_iterations
+            convex, _, _, _ = solve(None)
+            hypothesis = Reweighting(options.loop_model, loops)
+            more, other_termination, _, _ = solve(hypothesis)
+            iterations += convex + more
+            reweightings += hypothesis.rounds
+            other_residuals = edge_residuals.at(poses[inverse])
+            other_cost = _cost_of(other_residuals, final_losses)
+            if clusters is not None and overrules_several(
+                clusters,
+                loops,
+                loops & new_loops,
+                loops & ~new_loops & ~kernel.rejects(at_start),
+                kernel.rejects(_chi2_of(other_residuals)),
+            ):
+                other_cost = math.inf
             if other_cost < final_cost:
-                final_cost, termination = other_cost, termination_of
+                final_cost, termination = other_cost, other_termination
             else:
                 poses[:] = kept
     poses = poses[inverse]

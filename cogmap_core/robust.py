@@ -49,7 +49,7 @@ must bend to satisfy it. Measured first and dropped: graduating new links from t
 odometry could explain along the graph (as the relocalisation test does), and choosing the
 hypothesis with more inlier links (both in ``docs/maps.md``). A map's clusters of links are also
 judged against each other, so that one cluster of look-alike links cannot overrule several
-earlier ones, and a contested cluster can be dropped again (:mod:`cogmap_core.loop_revision`).
+earlier ones (:mod:`cogmap_core.cluster_consistency`).
 
 **Graduated non-convexity** (Yang, Antonante, Tzoumas & Carlone, RA-L 2020), with the
 Geman-McClure kernel, for any pose graph (``cogmap optimize --robust --gnc``): GNC-GM's

@@ -67,7 +67,6 @@ def save_map(cmap: CognitiveMap, prefix: str, arrays: Arrays) -> Json:
             arrays[prefix + "known_edges." + name] = known[name]
     save_records(arrays, prefix + "optimizations.", state["optimizations"], OptimizationRecord)
     save_records(arrays, prefix + "refused.", state["refused"], RelocalisationCheck)
-    save_lists(arrays, prefix + "contested", state["contested"])
     gate = state["gate"]
     save_records(
         arrays,
@@ -158,10 +157,6 @@ def load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
         },
         "optimizations": load_records(arrays, prefix + "optimizations.", OptimizationRecord),
         "refused": load_records(arrays, prefix + "refused.", RelocalisationCheck),
-        # (absent from files of before it existed: no contested cluster)
-        "contested": load_lists(arrays, prefix + "contested")
-        if prefix + "contested.count" in arrays
-        else [],
         "counters": s["counters"],
         "robot": s["robot"],
         "edges_at_last_optimization": s["edges_at_last_optimization"],

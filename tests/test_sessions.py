@@ -449,7 +449,6 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "_edges_at_last_optimization",
         "_optimized_once",
         "optimizations",
-        "contested",
         "refused",
         "_hist_time",
         "_hist_vertices",

@@ -1,5 +1,5 @@
-"""Loop-closure clusters judged against each other: one cluster cannot overrule several, and a
-contested cluster is revised when later links contradict it (:mod:`cogmap_core.loop_revision`)."""
+"""Loop-closure clusters judged against each other: one cluster cannot overrule several
+(:mod:`cogmap_core.cluster_consistency`)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,8 @@ import math
 
 import numpy as np
 
-from cogmap_core.cognitive_map import CognitiveMap
+from cogmap_core.cluster_consistency import overrules_several
 from cogmap_core.geometry import between
-from cogmap_core.loop_revision import ContestedClusters
 from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph
 from cogmap_core.posegraph import PoseGraph
 from cogmap_core.robust import LoopClosureModel
@@ -79,47 +78,23 @@ def test_one_cluster_cannot_overrule_several_earlier_ones():
     np.testing.assert_allclose(judged.poses[way_back, 1], GAP, atol=0.15)  # rejected links pull
 
 
-def test_a_contested_cluster_is_dropped_when_later_links_contradict_it():
-    """The structured cluster was accepted; a later true cluster says otherwise."""
-    first, clusters = corridor(EARLIER + STRUCTURED)
-    accepted = optimize_pose_graph(first, MODEL, new_loops=clusters == 3)
-    graph, clusters = corridor(EARLIER + STRUCTURED + LATER, start=accepted.poses)
-    new = clusters == 4
-    frozen = optimize_pose_graph(graph, MODEL, new_loops=new, clusters=clusters)
-    assert loop_rejections(graph, frozen.rejected) == [1] * 4 + [0] * 13 + [1] * 11
-    revised = optimize_pose_graph(
-        graph, MODEL, new_loops=new, suspects=[clusters == 3], clusters=clusters
-    )
-    assert loop_rejections(graph, revised.rejected) == [0] * 4 + [1] * 13 + [0] * 11
-    assert revised.final_cost < frozen.final_cost
-    way_back = slice(LENGTH + 1, None)
-    np.testing.assert_allclose(frozen.poses[way_back, 1], GAP - SHIFT, atol=0.15)
-    np.testing.assert_allclose(revised.poses[way_back, 1], GAP, atol=0.15)
-
-
-def test_contested_clusters_are_those_that_displaced_earlier_links():
-    record = ContestedClusters()
-    live = np.array([3, 4, 7, 8, 9], dtype=np.int64)
-    new = np.array([False, False, False, True, True])
-    before = np.array([True, True, False, False, False])
-    # nothing displaced: not contested
-    assert not record.note(live, new, before, np.array([False, False, False, True, False]))
-    # it displaced edge 4 and was accepted (9; 8 rejected): contested
-    assert record.note(live, new, before, np.array([False, True, False, True, False]))
-    assert record.state_dict() == [[9]]
-    masks = record.suspects(np.array([3, 9, 11], dtype=np.int64))
-    assert [m.tolist() for m in masks] == [[False, True, False]]
-    assert record.suspects(np.array([3, 4], dtype=np.int64)) == []  # its links are gone
-    again = ContestedClusters()
-    again.load_state(record.state_dict())
-    assert again.state_dict() == [[9]]
-
-
-def test_the_map_keeps_its_contested_clusters_in_its_state():
-    cmap = CognitiveMap("standard")
-    cmap.contested.groups.append(np.array([5, 6], dtype=np.int64))
-    state = cmap.state_dict()
-    assert state["contested"] == [[5, 6]]
-    assert CognitiveMap.from_state(state).contested.state_dict() == [[5, 6]]
-    del state["contested"]  # a state saved before the record existed
-    assert CognitiveMap.from_state(state).contested.state_dict() == []
+def test_a_hypothesis_may_overrule_one_earlier_cluster_but_not_two():
+    clusters = np.array([-1, 1, 1, 2, 3, 5, 5], dtype=np.int64)
+    loops = clusters >= 0
+    new = clusters == 5
+    held = loops & ~new
+    # the new cluster accepted, one earlier cluster displaced: cost decides
+    rejected = np.array([0, 1, 1, 0, 0, 0, 0], dtype=bool)
+    assert not overrules_several(clusters, loops, new, held, rejected)
+    # two earlier clusters displaced by one: not taken
+    rejected = np.array([0, 1, 0, 1, 0, 0, 0], dtype=bool)
+    assert overrules_several(clusters, loops, new, held, rejected)
+    # ... unless it also brings back an earlier cluster the start rejected
+    held = loops & ~new & (clusters != 3)
+    assert not overrules_several(clusters, loops, new, held, rejected)
+    # a hypothesis whose new links end rejected too has no cluster on its side
+    held = loops & ~new
+    rejected = np.array([0, 0, 0, 0, 0, 1, 1], dtype=bool)
+    assert not overrules_several(clusters, loops, new, held, rejected)
+    rejected[1] = True
+    assert overrules_several(clusters, loops, new, held, rejected)
