@@ -593,7 +593,8 @@ class CognitiveMap:
             return None  # no edge added since the last optimisation: it would change nothing
         # the edges added since the last optimisation: the robust loop model weighs the
         # hypothesis that its new links are true against the one that they are false
-        new_edges = graph.live_edges() >= self._edges_at_last_optimization
+        live = graph.live_edges()
+        new_edges = live >= self._edges_at_last_optimization
         self._edges_at_last_optimization = graph.num_edges_total
         self._optimized_once = True
         pose_graph = self.to_pose_graph()
@@ -609,6 +610,7 @@ class CognitiveMap:
                 loop_model=self.params.loop_closure_model(),
             ),
             new_loops=new_edges,
+            clusters=graph.edge_cluster[live],  # one cluster cannot overrule several
         )
         wall = wallclock.perf_counter() - started
         graph.pose[pose_graph.vertex_ids] = result.poses

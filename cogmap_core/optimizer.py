@@ -47,6 +47,7 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 
 from cogmap_core.ceres_blocks import EdgeGroupCost, Snapshot, SnapshotCost, plan_groups
+from cogmap_core.cluster_consistency import overrules_several
 from cogmap_core.edge_residuals import (
     EdgeLosses,
     EdgeModel,
@@ -268,6 +269,7 @@ def optimize_pose_graph(
     graph: PoseGraph,
     options: OptimizerOptions | None = None,
     new_loops: NDArray[np.bool_] | None = None,
+    clusters: IntArray | None = None,
 ) -> OptimizationResult:
     """Optimise ``graph`` with Ceres (sparse normal Cholesky, dynamic sparsity).
 
@@ -281,6 +283,10 @@ def optimize_pose_graph(
     convex Huber kernel first, so that a drifted estimate cannot hide them -- and the solution
     of lower robust cost is kept: the maximum a posteriori choice between "they are false" and
     "the map drifted". Costs are the final kernel's.
+
+    ``clusters``: each edge's cluster id (-1 for odometry). With them, that hypothesis is not
+    taken, whatever its cost, when it has one cluster overrule several
+    (:func:`~cogmap_core.cluster_consistency.overrules_several`).
 
     Raises:
         OptimizationError: non-finite poses or measurements, or Ceres failed.
@@ -435,7 +441,8 @@ def optimize_pose_graph(
             # The other hypothesis: the new links it rejected are true and the start is only
             # drifted. From the same start, those links are solved under the convex Huber
             # kernel (the other loop closures keep their weights at the start), then IRLS goes
-            # on as before; the solution of lower robust cost is kept.
+            # on as before; the solution of lower robust cost is kept -- unless it has one
+            # cluster overrule several (cogmap_core/cluster_consistency.py).
             kept = poses.copy()
             poses[:] = start
             kernel = options.loop_model.final_kernel
@@ -454,7 +461,16 @@ def optimize_pose_graph(
             more, other_termination, _, _ = solve(hypothesis)
             iterations += convex + more
             reweightings += hypothesis.rounds
-            other_cost = _cost_of(edge_residuals.at(poses[inverse]), final_losses)
+            other_residuals = edge_residuals.at(poses[inverse])
+            other_cost = _cost_of(other_residuals, final_losses)
+            if clusters is not None and overrules_several(
+                clusters,
+                loops,
+                loops & new_loops,
+                loops & ~new_loops & ~kernel.rejects(at_start),
+                kernel.rejects(_chi2_of(other_residuals)),
+            ):
+                other_cost = math.inf
             if other_cost < final_cost:
                 final_cost, termination = other_cost, other_termination
             else:

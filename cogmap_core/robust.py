@@ -47,7 +47,9 @@ lower robust cost -- the more probable under the model -- is kept
 then costs less accepted than rejected; a false one costs more accepted, because the odometry
 must bend to satisfy it. Measured first and dropped: graduating new links from the drift the
 odometry could explain along the graph (as the relocalisation test does), and choosing the
-hypothesis with more inlier links (both in ``docs/maps.md``).
+hypothesis with more inlier links (both in ``docs/maps.md``). A map's clusters of links are also
+judged against each other, so that one cluster of look-alike links cannot overrule several
+earlier ones (:mod:`cogmap_core.cluster_consistency`).
 
 **Graduated non-convexity** (Yang, Antonante, Tzoumas & Carlone, RA-L 2020), with the
 Geman-McClure kernel, for any pose graph (``cogmap optimize --robust --gnc``): GNC-GM's
