@@ -381,10 +381,15 @@ class MapGraph:
 
         Dijkstra over measured edge lengths, stopped at ``limit``: cheap when the answer is no
         path that short, which is what a consistency test needs to know. With a
-        :attr:`path_search` installed, that answers (the same answer, compiled).
+        :attr:`path_search` installed, that answers (the same answer, compiled); else
+        :meth:`python_distance_below`.
         """
         if self.path_search is not None:
             return self.path_search(source, target, limit)
+        return self.python_distance_below(source, target, limit)
+
+    def python_distance_below(self, source: int, target: int, limit: float) -> bool:
+        """:meth:`graph_distance_below` in Python over the adjacency: the reference search."""
         if source == target:
             return limit > 0
         best = {source: 0.0}

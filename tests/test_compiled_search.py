@@ -26,15 +26,6 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def python_answer(graph: MapGraph, source: int, target: int, limit: float) -> bool:
-    """The map's own (Python) search, whatever search is installed."""
-    installed, graph.path_search = graph.path_search, None
-    try:
-        return graph.graph_distance_below(source, target, limit)
-    finally:
-        graph.path_search = installed
-
-
 def random_graph(rng: np.random.Generator, n: int, extra: int) -> MapGraph:
     """A chain of ``n`` vertices about 0.1 m apart plus ``extra`` random links."""
     graph = MapGraph()
@@ -60,7 +51,7 @@ def ask_both(graph: MapGraph, search: PathSearch, rng: np.random.Generator, coun
         source, target = (int(x) for x in rng.choice(live, 2))
         limit = float(rng.uniform(0.0, 3.0))
         answer = search(source, target, limit)
-        assert answer == python_answer(graph, source, target, limit), (source, target, limit)
+        assert answer == graph.python_distance_below(source, target, limit), (source, target, limit)
         found += answer
     return found
 
@@ -118,7 +109,7 @@ def test_every_gate_search_of_a_compiled_rebuild_agrees_with_the_python_search(m
 
     def both(self: PathSearch, source: int, target: int, limit: float) -> bool:
         answer = compiled_call(self, source, target, limit)
-        assert answer == python_answer(self.graph, source, target, limit)
+        assert answer == self.graph.python_distance_below(source, target, limit)
         asked.append(answer)
         return answer
 
