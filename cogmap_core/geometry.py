@@ -63,6 +63,13 @@ def inverse(a: ArrayLike) -> FloatArray:
     return out
 
 
+def between_scalar(
+    a: tuple[float, float, float] | list[float], b: tuple[float, float, float] | list[float]
+) -> tuple[float, float, float]:
+    """:func:`between` of two single poses, in plain floats."""
+    return compose_scalar(inverse_scalar(a), b)
+
+
 def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
     """Relative pose of ``b`` in the frame of ``a``: ``inverse(a) (+) b``."""
     return compose(inverse(a), b)

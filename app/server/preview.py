@@ -28,7 +28,7 @@ import numpy as np
 
 from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.config import MapParams
-from cogmap_core.geometry import compose, compose_scalar, inverse_scalar
+from cogmap_core.geometry import between_scalar, compose
 from cogmap_core.map_graph import EdgeKind
 from cogmap_core.neighborhood_fields import is_novel
 from cogmap_core.parameter_table import MAP_PARAMETERS, PARAMETERS_USED
@@ -95,13 +95,6 @@ def make_preview(
     return None
 
 
-def _relative(
-    a: tuple[float, float, float], b: tuple[float, float, float]
-) -> tuple[float, float, float]:
-    """Pose ``b`` in the frame of pose ``a``."""
-    return compose_scalar(inverse_scalar(a), b)
-
-
 def compact_preview(standard: CognitiveMap, params: MapParams) -> CognitiveMap:
     """The compact map for ``params`` approximated from ``standard`` (module doc), no solve.
 
@@ -126,7 +119,7 @@ def compact_preview(standard: CognitiveMap, params: MapParams) -> CognitiveMap:
     for vid, row in zip(live.tolist(), source.pose[live].tolist(), strict=True):
         pose = (row[0], row[1], row[2])
         if last >= 0:
-            rel = _relative(last_pose, pose)
+            rel = between_scalar(last_pose, pose)
             if not is_novel(rel, alpha, beta, delta):
                 graph.add_alias(vid, last, rel)
                 rep[vid] = last
@@ -140,7 +133,7 @@ def compact_preview(standard: CognitiveMap, params: MapParams) -> CognitiveMap:
         target = rep[int(source.alias[vid])]
         if target >= 0:
             kept = tuple(graph.pose[target].tolist())
-            graph.add_alias(vid, int(target), _relative(kept, source.pose_of(vid)))
+            graph.add_alias(vid, int(target), between_scalar(kept, source.pose_of(vid)))
             rep[vid] = target
     edges = source.live_edges()
     ends_a = rep[source.edge_from[edges]]
@@ -148,14 +141,14 @@ def compact_preview(standard: CognitiveMap, params: MapParams) -> CognitiveMap:
     for k, a, b in zip(edges.tolist(), ends_a.tolist(), ends_b.tolist(), strict=True):
         if a == b or a < 0 or b < 0 or graph.edge_between(a, b) >= 0:
             continue
-        rel = _relative(tuple(graph.pose[a].tolist()), tuple(graph.pose[b].tolist()))
+        rel = between_scalar(tuple(graph.pose[a].tolist()), tuple(graph.pose[b].tolist()))
         kind = EdgeKind(int(source.edge_kind[k]))
         graph.add_edge(a, b, rel, float(source.edge_time[k]), kind, int(source.edge_cluster[k]))
     current = standard.current_vertex
     if current >= 0 and rep[current] >= 0:
         kept = int(rep[current])
         robot = tuple(standard.current_pose().tolist())
-        preview.place_robot(kept, _relative(tuple(graph.pose[kept].tolist()), robot))
+        preview.place_robot(kept, between_scalar(tuple(graph.pose[kept].tolist()), robot))
     preview.optimizations = list(standard.optimizations)
     return preview
 
