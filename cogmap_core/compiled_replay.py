@@ -186,7 +186,7 @@ def _self_check() -> bool:
 
 
 def _warm_up() -> None:
-    """Run the compiled loop once on a few events, so that a first rebuild does not compile it."""
+    """Run the compiled loop and path search once, so that a first rebuild compiles neither."""
     events: list[MapEvent] = [
         Odometry(0.1, 0.1, 0.0),
         CreateVertex(0.1, 0, 0),
@@ -195,7 +195,9 @@ def _warm_up() -> None:
         LinkToVertex(0.3, 0, 0.0),
         SetCurrentVertex(0.3, 0, 0.0),
     ]
-    CompiledReplay(CognitiveMap(MapMode.COMPACT)).apply(events_to_columns(events), 0, len(events))
+    cmap = CognitiveMap(MapMode.STANDARD)
+    CompiledReplay(cmap).apply(events_to_columns(events), 0, len(events))
+    compiled_search.PathSearch(cmap.graph)(0, 1, 1.0)
 
 
 class CompiledReplay:
