@@ -284,6 +284,27 @@ def test_a_tab_closed_while_its_page_is_built_leaves_no_view_and_no_error(
             until(lambda: len(app.views) == 1)
 
 
+def test_the_status_never_waits_for_the_replays_lock(short_bag: Path) -> None:
+    """The replay thread updates the status holding its condition; a viewer's change holds the
+    replay's lock and waits for that condition (set_priority): the status must not take the
+    lock, or the two wait for each other forever (seen as a hung test run)."""
+    with running_app(short_bag) as app:
+        wait(app)
+        done = threading.Event()
+
+        def status_as_the_replay_thread_gives_it() -> None:
+            with app.replay._cond:
+                app.update_status(force=True)
+            done.set()
+
+        with app.replay.lock:  # as a viewer's change holds it
+            thread = threading.Thread(target=status_as_the_replay_thread_gives_it, daemon=True)
+            thread.start()
+            finished = done.wait(5)
+        thread.join(5)
+        assert finished
+
+
 def test_the_replay_waits_for_the_first_viewer(short_bag: Path) -> None:
     with running_app(short_bag, wait_for_viewer=True) as app:
         until(lambda: app.replay.state is PlaybackState.PAUSED)

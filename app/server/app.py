@@ -479,10 +479,13 @@ class CogmapApp:
         )
         rebuilding = r.rebuilding
         self._rebuild_shown = rebuilding
-        with r.lock:
-            previews = {mode: p.description for mode, p in r.previews.items()}
-            differences = dict(r.rebuilds[-1].preview_difference) if r.rebuilds else {}
-            content = built_content(r.session.maps.maps, rebuilding, previews, differences)
+        # Not under the replay's lock: the replay thread calls this holding its condition, while
+        # a viewer's change holds that lock and waits for the condition (Replay.set_priority).
+        # Copies of the dicts are taken whole instead (one C-level copy each, under the GIL).
+        previews = {mode: p.description for mode, p in dict(r.previews).items()}
+        last = r.rebuilds[-1] if r.rebuilds else None
+        differences = dict(last.preview_difference) if last is not None else {}
+        content = built_content(r.session.maps.maps, rebuilding, previews, differences)
         set_content(self.live.built_html, content)
         self.playback.follow(force)
 
