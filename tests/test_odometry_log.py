@@ -78,6 +78,22 @@ def test_tuc_log_becomes_odometry_vertices_and_links(straight: Path) -> None:
     assert (stats.duplicates, stats.links, stats.frames) == (1, 2, 82)
 
 
+def test_a_candidate_below_the_threshold_changes_no_step(straight: Path, tmp_path: Path) -> None:
+    log = read_tuc(straight)
+    steps, stats = log_steps(log)
+    # the same log with two more candidates below the threshold, queried between two stamps
+    weak = ["loop 4.0625 1.0 0.3", "loop 6.1 2.0 0.79"]
+    more = write(tmp_path / "weak_Input.txt", odom_lines() + LOOPS + weak)
+    more_steps, more_stats = log_steps(read_tuc(more))
+    assert more_steps == steps
+    assert (more_stats.below_threshold, stats.below_threshold) == (3, 1)
+    assert (more_stats.frames, more_stats.links) == (stats.frames, stats.links) == (82, 2)
+    # at a lower threshold the same query becomes a step, and a link
+    config = LogSourceConfig(score_threshold=0.25, min_loop_travel=0.0)
+    times = [s.time for s in log_steps(read_tuc(more), config)[0]]
+    assert 4.0625 in times and 6.1 in times and len(times) == 84
+
+
 def test_settings_change_the_events(straight: Path) -> None:
     log = read_tuc(straight)
     config = LogSourceConfig(score_threshold=0.5, min_loop_travel=0.0, relocalise=True)

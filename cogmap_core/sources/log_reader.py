@@ -105,9 +105,12 @@ def log_steps(
 ) -> tuple[list[EventStep], LogStats]:
     """The log as steps of map events (module doc), with what became of its loops.
 
-    Steps are at every odometry stamp and every loop-query time; each holds the odometry since
-    the previous step, a proposed vertex when the robot moved far enough, and the query's
-    links. Deterministic: the same log and settings give the same steps.
+    Steps are at every odometry stamp and at the time of every loop query with a candidate at
+    or above the score threshold; each holds the odometry since the previous step, a proposed
+    vertex when the robot moved far enough, and the query's links. A candidate below the
+    threshold changes nothing, not even where the odometry is sampled (the vertices would move
+    by a step, and the maps with them). Deterministic: the same log and settings give the same
+    steps.
     """
     cfg = config or LogSourceConfig()
     odo = log.odometry
@@ -115,7 +118,8 @@ def log_steps(
     t_odo = odo[:, 0] - t0
     loops, moved, outside = loops_in_span(log, cfg.max_odometry_gap)
     loops[:, :2] -= t0
-    times = np.union1d(t_odo, loops[:, 0]) if loops.size else t_odo.copy()
+    linkable = loops[loops[:, 2] >= cfg.score_threshold, 0] if loops.size else loops[:, 0]
+    times = np.union1d(t_odo, linkable)
     # velocities of sample i hold over (t_{i-1}, t_i]
     sample = np.minimum(np.searchsorted(t_odo, times, side="left"), t_odo.size - 1)
     interval = np.diff(t_odo, prepend=t_odo[0])[sample]
