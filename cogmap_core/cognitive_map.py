@@ -619,7 +619,9 @@ class CognitiveMap:
             integrated = self.integration.after_optimisation(graph, self.params)
             self.counters.integrated += integrated
         if self._removes_short:
-            short = remove_short_edges(graph, self.params.short_edge_threshold)
+            short = remove_short_edges(
+                graph, self.params.short_edge_threshold, self.params.short_edge_loops >= 0.5
+            )
             self.counters.short_edges += short
         self._follow_merges()
         record = OptimizationRecord(

@@ -87,6 +87,10 @@ class MapParams:
             (:class:`~cogmap_core.edge_noise.OdometryNoise`). 0 (camera inputs): every edge is
             one step. A log's is its vertex step (``LogReader.map_params``).
         odometry_step_turn: ... and their turn (rad); a log's vertex turn.
+        short_edge_loops: 1 (the paper, camera inputs): short-edge removal contracts a loop
+            closure whose two ends the optimisation brought together, like any edge; 0 (a
+            log's default): never, so that the loop model can still reject the link at a later
+            optimisation (:mod:`~cogmap_core.short_edges`).
 
     """
 
@@ -113,6 +117,7 @@ class MapParams:
     odometry_scale: float = 1.0
     odometry_step_length: float = 0.0
     odometry_step_turn: float = 0.0
+    short_edge_loops: float = 1.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range."""

@@ -327,6 +327,13 @@ MAP_PARAMETERS: tuple[MapParameter, ...] = (
         valid=(0.0, True, 1e6),
         maps=_EVERY_MAP,
     ),
+    MapParameter(
+        name="short_edge_loops",
+        meaning="1: short-edge removal contracts loop closures too (the paper); 0: never",
+        valid=(0.0, True, 1.0),
+        maps=_COMPACT,
+        whole_number=True,
+    ),
 )
 """The table (module doc), in the order of the fields of ``MapParams``."""
 

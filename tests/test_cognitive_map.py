@@ -485,3 +485,45 @@ def test_short_edge_keeps_the_older_place():
     assert remove_short_edges(graph, 0.03) == 2
     assert graph.live_ids().tolist() == [0, 1, 3]  # the newer end of each short edge goes
     assert graph.resolve(2)[0] == 1 and graph.resolve(4)[0] == 3
+
+
+def test_a_short_loop_closure_is_not_contracted_where_the_map_keeps_links():
+    from cogmap_core.map_graph import EdgeKind as Kind
+    from cogmap_core.map_graph import MapGraph
+    from cogmap_core.short_edges import remove_short_edges
+
+    graph = MapGraph()
+    for vid, (t, x) in enumerate([(0.0, 0.0), (1.0, 0.5), (30.0, 0.51), (30.1, 0.9)]):
+        graph.new_id(vid, t, vid)
+        graph.add_vertex(vid, (x, 0.0, 0.0))
+    graph.add_edge(0, 1, (0.5, 0.0, 0.0), 1.0, Kind.SEQUENTIAL, -1)
+    link = graph.add_edge(2, 1, (0.0, 0.0, 0.0), 30.0, Kind.LOOP_CLOSURE, 0)  # 1 cm apart
+    graph.add_edge(2, 3, (0.39, 0.0, 0.0), 30.1, Kind.SEQUENTIAL, -1)
+    # accepted now, the link must stay one the loop model can reject at a later optimisation
+    assert remove_short_edges(graph, 0.03, contract_loops=False) == 0
+    assert graph.live_ids().tolist() == [0, 1, 2, 3] and graph.edge_alive[link]
+    graph.pose[3] = (0.52, 0.0, 0.0)  # a sequential edge beside it does become short
+    assert remove_short_edges(graph, 0.03, contract_loops=False) == 1
+    assert graph.live_ids().tolist() == [0, 1, 2] and graph.resolve(3)[0] == 2
+    # the paper's rule contracts the link too
+    assert remove_short_edges(graph, 0.03) == 1 and graph.live_ids().tolist() == [0, 1]
+
+
+def test_a_log_s_compact_map_keeps_its_accepted_links() -> None:
+    from cogmap_core.sources.odometry_log import LOG_MAP_PARAMS
+
+    assert MapParams().short_edge_loops == 1.0 and LOG_MAP_PARAMS.short_edge_loops == 0.0
+    s = Script()
+    s.create()  # 0
+    s.move(0.5)
+    s.create()  # 1
+    s.move(-0.49)
+    s.create()  # 2, back 1 cm from 0
+    s.link(0)  # the same place: the optimisation brings the two ends together
+    params = KEEP_ALL.with_changes(short_edge_threshold=0.03)
+    contracted = build("compact", s, params, finish=False)
+    kept = build("compact", s, params.with_changes(short_edge_loops=0.0), finish=False)
+    contracted.optimize_now()
+    kept.optimize_now()
+    assert (2, 0) not in edges_of(contracted) and contracted.num_vertices == 2
+    assert (2, 0) in edges_of(kept) and kept.num_vertices == 3

@@ -119,8 +119,14 @@ def test_the_valid_ranges_and_meanings_are_as_before():
             1e6,
             "turn of the odometry steps an edge is made of (rad; 0: one per edge)",
         ),
+        "short_edge_loops": (
+            0.0,
+            True,
+            1.0,
+            "1: short-edge removal contracts loop closures too (the paper); 0: never",
+        ),
     }
-    assert config._WHOLE_NUMBERS == {"loop_model"}
+    assert config._WHOLE_NUMBERS == {"loop_model", "short_edge_loops"}
     assert config.parameter_range("delta") == (1.0, False, 1e12)
     with pytest.raises(ParameterError, match=r"^loop_model=1\.5 is out of range: robust"):
         MapParams(loop_model=1.5)
