@@ -118,8 +118,7 @@ def log_steps(
     t_odo = odo[:, 0] - t0
     loops, moved, outside = loops_in_span(log, cfg.max_odometry_gap)
     loops[:, :2] -= t0
-    linkable = loops[loops[:, 2] >= cfg.score_threshold, 0] if loops.size else loops[:, 0]
-    times = np.union1d(t_odo, linkable)
+    times = np.union1d(t_odo, loops[_reaches_threshold(loops, cfg), 0])
     # velocities of sample i hold over (t_{i-1}, t_i]
     sample = np.minimum(np.searchsorted(t_odo, times, side="left"), t_odo.size - 1)
     interval = np.diff(t_odo, prepend=t_odo[0])[sample]
@@ -228,11 +227,16 @@ def _candidate_verdicts(
     loops: FloatArray, times: FloatArray, travelled: FloatArray, cfg: LogSourceConfig
 ) -> tuple[BoolArray, BoolArray]:
     """Per candidate: its score reaches the threshold; ... but too little was driven since."""
-    keep = loops[:, 2] >= cfg.score_threshold
+    keep = _reaches_threshold(loops, cfg)
     driven = travelled[np.searchsorted(times, loops[:, 0])] - np.interp(
         loops[:, 1], times, travelled
     )
     return keep, keep & (driven < cfg.min_loop_travel)
+
+
+def _reaches_threshold(loops: FloatArray, cfg: LogSourceConfig) -> BoolArray:
+    """Per candidate: its score reaches ``score_threshold`` (below it, a candidate is nothing)."""
+    return loops[:, 2] >= cfg.score_threshold
 
 
 def _nearest(times: list[float], t: float) -> int:
