@@ -611,6 +611,7 @@ class CognitiveMap:
             ),
             new_loops=new_edges,
             clusters=graph.edge_cluster[live],  # one cluster cannot overrule several
+            merged_on=graph.edge_held[live],  # ... nor a merge
         )
         wall = wallclock.perf_counter() - started
         graph.pose[pose_graph.vertex_ids] = result.poses

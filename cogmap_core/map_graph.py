@@ -105,6 +105,7 @@ def _edge_rows(
 VERTEX_ARRAYS = ("pose", "vertex_time", "view", "alive", "alias", "alias_offset")
 EDGE_ARRAYS = (
     "edge_from", "edge_to", "edge_rel", "edge_time", "edge_kind", "edge_cluster", "edge_alive",
+    "edge_held",
 )  # fmt: skip
 #: What a new graph's arrays hold past the rows in use.
 _FILL = {"alias": -1, "edge_cluster": -1}
@@ -162,6 +163,8 @@ class MapGraph:
         self.edge_kind = np.zeros(cap, dtype=np.int8)
         self.edge_cluster = np.full(cap, -1, dtype=np.int64)
         self.edge_alive = np.zeros(cap, dtype=bool)
+        # edge_held[k]: loop closure k is one a merge rests on (hold_edge)
+        self.edge_held = np.zeros(cap, dtype=bool)
         self.num_edges_total = 0
         self.adjacency: list[dict[int, int]] = []
         # absorbed[v]: ids whose alias is v (besides v itself), to re-point them on a merge
@@ -257,6 +260,7 @@ class MapGraph:
             self.edge_kind = grow_array(self.edge_kind, new)
             self.edge_cluster = grow_array(self.edge_cluster, new, fill=-1)
             self.edge_alive = grow_array(self.edge_alive, new)
+            self.edge_held = grow_array(self.edge_held, new)
         self.edge_from[k], self.edge_to[k] = src, dst
         self.edge_rel[k] = (rel[0], rel[1], wrap_scalar(rel[2]))
         self.edge_time[k] = t
@@ -284,6 +288,16 @@ class MapGraph:
         self.num_edges -= 1
         if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
             self.num_loop_edges -= 1
+
+    def hold_edge(self, k: int) -> None:
+        """Mark loop closure ``k`` as one a merge rests on (it stays marked if re-attached).
+
+        Scene integration merges a revisit run only when the links that bracket it are kept by
+        the loop model; a later optimisation must not then reject them while the merge stands
+        (:func:`~cogmap_core.cluster_consistency.overrules_a_merge`).
+        """
+        if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
+            self.edge_held[k] = True
 
     def live_edges(self) -> IntArray:
         """Indices of the live edges, in creation order."""

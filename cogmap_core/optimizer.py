@@ -47,7 +47,7 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, reverse_cuthill_mckee
 
 from cogmap_core.ceres_blocks import EdgeGroupCost, Snapshot, SnapshotCost, plan_groups
-from cogmap_core.cluster_consistency import overrules_several
+from cogmap_core.cluster_consistency import overrules_a_merge, overrules_several
 from cogmap_core.edge_residuals import (
     EdgeLosses,
     EdgeModel,
@@ -270,6 +270,7 @@ def optimize_pose_graph(
     options: OptimizerOptions | None = None,
     new_loops: NDArray[np.bool_] | None = None,
     clusters: IntArray | None = None,
+    merged_on: NDArray[np.bool_] | None = None,
 ) -> OptimizationResult:
     """Optimise ``graph`` with Ceres (sparse normal Cholesky, dynamic sparsity).
 
@@ -286,7 +287,9 @@ def optimize_pose_graph(
 
     ``clusters``: each edge's cluster id (-1 for odometry). With them, that hypothesis is not
     taken, whatever its cost, when it has one cluster overrule several
-    (:func:`~cogmap_core.cluster_consistency.overrules_several`).
+    (:func:`~cogmap_core.cluster_consistency.overrules_several`). ``merged_on``: the loop
+    closures merges rest on; nor is it taken when it rejects one of them
+    (:func:`~cogmap_core.cluster_consistency.overrules_a_merge`).
 
     Raises:
         OptimizationError: non-finite poses or measurements, or Ceres failed.
@@ -463,13 +466,12 @@ def optimize_pose_graph(
             reweightings += hypothesis.rounds
             other_residuals = edge_residuals.at(poses[inverse])
             other_cost = _cost_of(other_residuals, final_losses)
-            if clusters is not None and overrules_several(
-                clusters,
-                loops,
-                loops & new_loops,
-                loops & ~new_loops & ~kernel.rejects(at_start),
-                kernel.rejects(_chi2_of(other_residuals)),
-            ):
+            held = loops & ~new_loops & ~kernel.rejects(at_start)
+            other_rejects = kernel.rejects(_chi2_of(other_residuals))
+            if (
+                clusters is not None
+                and overrules_several(clusters, loops, loops & new_loops, held, other_rejects)
+            ) or (merged_on is not None and overrules_a_merge(merged_on, held, other_rejects)):
                 other_cost = math.inf
             if other_cost < final_cost:
                 final_cost, termination = other_cost, other_termination

@@ -30,10 +30,14 @@ edges just removed) -- when
    re-walked mapped corridors.
 
 Each vertex of a redundant run is merged into the nearer end of that edge, its edges re-attached
-with the current (optimised) relative pose. Nothing else is ever removed: a first-visit vertex
-belongs to no run that starts on known ground and passes 3 -- not even the last one before a loop
-closes, a few centimetres short of the place the robot then recognises -- and the vertex where
-the robot leaves known ground begins a run that does not stay on known ground.
+with the current (optimised) relative pose. The links that bracket a merged run are then *held*
+(``MapGraph.hold_edge``): the merge rests on them, so no later optimisation's hypothesis may
+reject them while it stands (:func:`~cogmap_core.cluster_consistency.overrules_a_merge`).
+
+Nothing else is ever removed: a first-visit vertex belongs to no run that starts on known ground
+and passes 3 -- not even the last one before a loop closes, a few centimetres short of the place
+the robot then recognises -- and the vertex where the robot leaves known ground begins a run
+that does not stay on known ground.
 
 **Re-localised by a link alone.** A front end may report a recognised place as a link without
 moving the robot onto the old vertex (a log of odometry and place recognition,
@@ -311,13 +315,26 @@ class SceneIntegration:
             u, w = (graph.resolve(x)[0] for x in edge)
             gaps = np.hypot(*(graph.pose[[u, w], :2] - graph.pose[v, :2]).T)
             absorbers.append(u if gaps[0] <= gaps[1] else w)
+        links = _bracketing_links(graph, run)
         merged = 0
         for v, kept in zip(members, absorbers, strict=True):
             kept = graph.resolve(kept)[0]
             if graph.alive[v] and kept != v:
                 _merge(graph, v, kept)
                 merged += 1
+        if merged:
+            for k in links:
+                graph.hold_edge(k)
         return merged
+
+
+def _bracketing_links(graph: MapGraph, run: RevisitRun) -> list[int]:
+    """The loop closures a run's merge rests on: its closing link and, if any, its opening one."""
+    links = [graph.edge_between(graph.resolve(run.vertices[-1])[0], graph.resolve(run.end)[0])]
+    if run.opened_from >= 0:
+        robot, place = graph.resolve(run.opened_from)[0], graph.resolve(run.start)[0]
+        links.append(graph.edge_between(robot, place))
+    return [k for k in links if k >= 0]
 
 
 def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:

@@ -26,7 +26,8 @@ JSON (as Python writes it; ``NaN`` and ``Infinity`` may occur)::
 them all with shape and dtype, and a file whose members do not match it is refused. Files are
 written to a temporary name beside the target and renamed when complete. ``log.score`` (each
 link's place-recognition score, NaN where none) may be absent: files written before it existed
-load with no scores.
+load with no scores; ``map.<mode>.graph.edge_held`` (the links merges rest on) likewise, with
+none held.
 """
 
 from __future__ import annotations

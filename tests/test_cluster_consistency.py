@@ -1,5 +1,5 @@
-"""Loop-closure clusters judged against each other: one cluster cannot overrule several
-(:mod:`cogmap_core.cluster_consistency`)."""
+"""Loop-closure clusters judged against each other: one cluster cannot overrule several, nor a
+merge (:mod:`cogmap_core.cluster_consistency`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from cogmap_core.cluster_consistency import overrules_several
+from cogmap_core.cluster_consistency import overrules_a_merge, overrules_several
 from cogmap_core.geometry import between
 from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph
 from cogmap_core.posegraph import PoseGraph
@@ -98,3 +98,32 @@ def test_a_hypothesis_may_overrule_one_earlier_cluster_but_not_two():
     assert not overrules_several(clusters, loops, new, held, rejected)
     rejected[1] = True
     assert overrules_several(clusters, loops, new, held, rejected)
+
+
+def test_a_hypothesis_that_rejects_a_link_a_merge_rests_on_is_not_taken():
+    """13 structured false links displace one earlier cluster: cost decides, unless a merge
+    rests on one of that cluster's links."""
+    one_cluster = [(x, 1, 0.0) for x, _, _ in EARLIER]
+    graph, clusters = corridor(one_cluster + STRUCTURED)
+    new = clusters == 3
+    on_cost = optimize_pose_graph(graph, MODEL, new_loops=new, clusters=clusters)
+    assert loop_rejections(graph, on_cost.rejected) == [1] * 4 + [0] * 13
+    for held in range(4):
+        merged_on = np.zeros(graph.num_edges, dtype=bool)
+        merged_on[np.flatnonzero(graph.loop_closures())[held]] = True
+        judged = optimize_pose_graph(
+            graph, MODEL, new_loops=new, clusters=clusters, merged_on=merged_on
+        )
+        assert loop_rejections(graph, judged.rejected) == [0] * 4 + [1] * 13
+        assert judged.final_cost > on_cost.final_cost
+        np.testing.assert_allclose(judged.poses[LENGTH + 1 :, 1], GAP, atol=0.15)
+    # a merge resting on one of the new links holds nothing back
+    judged = optimize_pose_graph(graph, MODEL, new_loops=new, clusters=clusters, merged_on=new)
+    assert loop_rejections(graph, judged.rejected) == [1] * 4 + [0] * 13
+
+
+def test_only_a_held_link_accepted_at_the_start_and_rejected_at_the_end_counts():
+    merged_on = np.array([0, 1, 1, 1, 0], dtype=bool)
+    held = np.array([0, 1, 1, 0, 1], dtype=bool)  # accepted at the start
+    assert not overrules_a_merge(merged_on, held, np.array([1, 0, 0, 1, 1], dtype=bool))
+    assert overrules_a_merge(merged_on, held, np.array([0, 0, 1, 0, 0], dtype=bool))

@@ -16,6 +16,7 @@ import pytest
 from cogmap_core.cognitive_map import CognitiveMap
 from cogmap_core.config import MapParams
 from cogmap_core.geometry import between
+from cogmap_core.map_graph import EdgeKind
 from tests.mapscript import Script
 
 HALF_PI = math.pi / 2
@@ -190,6 +191,18 @@ def links_alone_lap(false_at: int | None = None) -> SquareLoop:
         loop.advance()
     loop.s.link(loop.first[0])
     return loop
+
+
+def test_the_links_a_merged_run_rests_on_are_held():
+    """Each run between two links closes on one link and opens on the one before: once merged,
+    both are held (no hypothesis may reject them while the merge stands); no map without scene
+    integration holds a link."""
+    loop = links_alone_lap()
+    for mode, held in (("standard", 0), ("scene_integration", 11)):
+        graph = build(mode, loop.s).graph
+        loops = graph.edge_kind[: graph.num_edges_total] == EdgeKind.LOOP_CLOSURE
+        assert int(loops.sum()) == 11  # lap 1's closing link and one every 8 steps of lap 2
+        assert graph.edge_held[: graph.num_edges_total].tolist() == (loops & (held > 0)).tolist()
 
 
 def test_a_run_opened_by_a_rejected_link_is_not_integrated():

@@ -310,6 +310,27 @@ def test_another_format_version_is_refused(
     assert len(err.splitlines()) == 1 and not out.exists()
 
 
+def test_a_file_from_before_held_links_loads_with_none_held(resumed: Path, tmp_path: Path) -> None:
+    """``map.<mode>.graph.edge_held`` is absent from older files: the maps load without it."""
+    session = resumed / "day1.session.npz"
+    with np.load(session) as data:
+        arrays = {name: data[name] for name in data.files if not name.endswith(".edge_held")}
+    header = json.loads(str(arrays["header"]))
+    header["arrays"] = {k: v for k, v in header["arrays"].items() if not k.endswith(".edge_held")}
+    arrays["header"] = np.asarray(json.dumps(header))
+    older = tmp_path / "older.npz"
+    np.savez(older, **arrays)
+    new, _ = load_session(session)
+    old, _ = load_session(older)
+    held = {m: new.maps[m].graph.edge_held for m in new.maps.maps}
+    assert held[MapMode.SCENE_INTEGRATION].any() and not held[MapMode.STANDARD].any()
+    for mode, cmap in old.maps.maps.items():
+        graph = cmap.graph
+        assert graph.edge_held.shape == held[mode].shape and not graph.edge_held.any()
+        graph.edge_held = held[mode].copy()
+    assert same_state(new, old)
+
+
 @pytest.mark.parametrize("counter", ["proposed", "integrated", "refused_relocalisations"])
 def test_counters_that_do_not_add_up_are_refused(
     counter: str, resumed: Path, tmp_path: Path
@@ -469,6 +490,7 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "edge_kind",
         "edge_cluster",
         "edge_alive",
+        "edge_held",
         "num_edges_total",
         "adjacency",
         "_absorbed",

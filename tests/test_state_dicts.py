@@ -109,6 +109,7 @@ def test_a_graph_s_state_is_its_rows_in_use_adjacency_and_aliases() -> None:
             "edge_kind": np.array([0], dtype=np.int8),
             "edge_cluster": np.array([-1], dtype=np.int64),
             "edge_alive": np.array([True]),
+            "edge_held": np.array([False]),
             "adjacency": [{1: 0}, {0: 0}, {}],
             "absorbed": [[], [2], []],
             "num_ids": 3,
