@@ -47,7 +47,7 @@ def overrules_several(
     clusters: IntArray,
     loops: BoolArray,
     new: BoolArray,
-    held: BoolArray,
+    accepted: BoolArray,
     rejected: BoolArray,
 ) -> bool:
     """Whether a hypothesis has one cluster overrule several (module doc): it is not taken.
@@ -56,25 +56,25 @@ def overrules_several(
         clusters: ``(E,)`` each edge's cluster id (-1 for odometry).
         loops: ``(E,)`` the loop closures.
         new: ``(E,)`` the loop closures added since the last optimisation.
-        held: ``(E,)`` the earlier loop closures the model accepts at the start.
+        accepted: ``(E,)`` the earlier loop closures the model accepts at the start.
         rejected: ``(E,)`` the edges the model rejects at the hypothesis' solution.
 
     """
-    displaced = np.unique(clusters[held & rejected]).size
-    revived = np.unique(clusters[loops & ~new & ~held & ~rejected]).size
+    displaced = np.unique(clusters[accepted & rejected]).size
+    revived = np.unique(clusters[loops & ~new & ~accepted & ~rejected]).size
     return bool(displaced > revived + int((new & ~rejected).any()))
 
 
-def overrules_a_merge(merged_on: BoolArray, held: BoolArray, rejected: BoolArray) -> bool:
+def overrules_a_merge(merged_on: BoolArray, accepted: BoolArray, rejected: BoolArray) -> bool:
     """Whether a hypothesis rejects a link a merge rests on (module doc): it is not taken.
 
     Args:
         merged_on: ``(E,)`` the loop closures merges rest on (``MapGraph.edge_held``).
-        held: ``(E,)`` the earlier loop closures the model accepts at the start.
+        accepted: ``(E,)`` the earlier loop closures the model accepts at the start.
         rejected: ``(E,)`` the edges the model rejects at the hypothesis' solution.
 
     """
-    return bool((merged_on & held & rejected).any())
+    return bool((merged_on & accepted & rejected).any())
 
 
 __all__ = ["overrules_a_merge", "overrules_several"]

@@ -466,12 +466,14 @@ def optimize_pose_graph(
             reweightings += hypothesis.rounds
             other_residuals = edge_residuals.at(poses[inverse])
             other_cost = _cost_of(other_residuals, final_losses)
-            held = loops & ~new_loops & ~kernel.rejects(at_start)
+            accepted = loops & ~new_loops & ~kernel.rejects(at_start)
             other_rejects = kernel.rejects(_chi2_of(other_residuals))
-            if (
-                clusters is not None
-                and overrules_several(clusters, loops, loops & new_loops, held, other_rejects)
-            ) or (merged_on is not None and overrules_a_merge(merged_on, held, other_rejects)):
+            vetoed = clusters is not None and overrules_several(
+                clusters, loops, loops & new_loops, accepted, other_rejects
+            )
+            if merged_on is not None and not vetoed:
+                vetoed = overrules_a_merge(merged_on, accepted, other_rejects)
+            if vetoed:
                 other_cost = math.inf
             if other_cost < final_cost:
                 final_cost, termination = other_cost, other_termination

@@ -124,6 +124,6 @@ def test_a_hypothesis_that_rejects_a_link_a_merge_rests_on_is_not_taken():
 
 def test_only_a_held_link_accepted_at_the_start_and_rejected_at_the_end_counts():
     merged_on = np.array([0, 1, 1, 1, 0], dtype=bool)
-    held = np.array([0, 1, 1, 0, 1], dtype=bool)  # accepted at the start
-    assert not overrules_a_merge(merged_on, held, np.array([1, 0, 0, 1, 1], dtype=bool))
-    assert overrules_a_merge(merged_on, held, np.array([0, 0, 1, 0, 0], dtype=bool))
+    accepted = np.array([0, 1, 1, 0, 1], dtype=bool)  # at the start
+    assert not overrules_a_merge(merged_on, accepted, np.array([1, 0, 0, 1, 1], dtype=bool))
+    assert overrules_a_merge(merged_on, accepted, np.array([0, 0, 1, 0, 0], dtype=bool))
