@@ -330,11 +330,20 @@ class SceneIntegration:
 
 def _bracketing_links(graph: MapGraph, run: RevisitRun) -> list[int]:
     """The loop closures a run's merge rests on: its closing link and, if any, its opening one."""
-    links = [graph.edge_between(graph.resolve(run.vertices[-1])[0], graph.resolve(run.end)[0])]
-    if run.opened_from >= 0:
-        robot, place = graph.resolve(run.opened_from)[0], graph.resolve(run.start)[0]
-        links.append(graph.edge_between(robot, place))
-    return [k for k in links if k >= 0]
+    closing = graph.edge_between(graph.resolve(run.vertices[-1])[0], graph.resolve(run.end)[0])
+    return [k for k in (closing, _opening_link(graph, run)) if k >= 0]
+
+
+def _opening_link(graph: MapGraph, run: RevisitRun) -> int:
+    """The edge of the link that alone re-localised the robot where the run began (-1: none).
+
+    None when the robot was set there, or when the link made no edge of its own (it duplicated
+    one).
+    """
+    if run.opened_from < 0:
+        return -1
+    robot, place = graph.resolve(run.opened_from)[0], graph.resolve(run.start)[0]
+    return graph.edge_between(robot, place)
 
 
 def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:
@@ -342,14 +351,10 @@ def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:
     closing = _link_residual(graph, run.vertices[-1], run.end, run.closing, params)
     if closing > params.integration_max_residual:
         return False
-    if run.opened_from < 0:
-        return True  # opened where the robot was set (or where it drove on from)
-    robot, place = graph.resolve(run.opened_from)[0], graph.resolve(run.start)[0]
-    k = graph.edge_between(robot, place)
+    k = _opening_link(graph, run)
     if k < 0:
-        return True  # the opening link made no edge of its own (it duplicated one)
-    if graph.edge_from[k] != robot:
-        robot, place = place, robot
+        return True  # opened where the robot was set (or drove on from), or no edge of its own
+    robot, place = int(graph.edge_from[k]), int(graph.edge_to[k])
     model = params.loop_closure_model()
     if model is None:
         return True  # the paper's Huber rejects no link
