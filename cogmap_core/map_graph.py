@@ -109,6 +109,9 @@ EDGE_ARRAYS = (
 )  # fmt: skip
 #: What a new graph's arrays hold past the rows in use.
 _FILL = {"alias": -1, "edge_cluster": -1}
+#: Arrays a state written before they existed lacks (``load_state`` fills them with zeros):
+#: ``edge_held``, the links merges rest on -- none held.
+_ADDED_LATER = ("edge_held",)
 _INITIAL_CAPACITY = 256
 
 
@@ -361,6 +364,8 @@ class MapGraph:
     def load_state(self, state: dict[str, Any]) -> None:
         """Become the graph :meth:`state_dict` described (its arrays grown as a new graph's).
 
+        A state written before an array of ``_ADDED_LATER`` existed loads with it all zeros.
+
         Raises:
             StateError: parts that do not fit together (an array or the adjacency of another
                 size than the counts, live vertices other than ``num_vertices``).
@@ -371,7 +376,10 @@ class MapGraph:
         for name in (*VERTEX_ARRAYS, *EDGE_ARRAYS):
             like = getattr(self, name)  # dtype and row shape
             rows = n if name in VERTEX_ARRAYS else m
-            saved = np.asarray(state[name])
+            if name in _ADDED_LATER and name not in state:
+                saved = np.zeros((rows, *like.shape[1:]), dtype=like.dtype)
+            else:
+                saved = np.asarray(state[name])
             if saved.shape != (rows, *like.shape[1:]):
                 raise StateError(f"graph.{name} does not match the graph")
             saved = saved.astype(like.dtype, copy=False)

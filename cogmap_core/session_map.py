@@ -110,16 +110,12 @@ def load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
         pairs = zip(neighbours[start : start + c], edges[start : start + c], strict=True)
         adjacency.append(dict(pairs))
         start += c
+    # (graph.edge_held is absent from older files: MapGraph.load_state holds none)
     graph: Json = {
         name: arrays[prefix + "graph." + name]
         for name in (*VERTEX_ARRAYS, *EDGE_ARRAYS)
-        if name != "edge_held"
+        if prefix + "graph." + name in arrays
     }
-    # (graph.edge_held, the links merges rest on, is absent from older files: none held)
-    held = prefix + "graph.edge_held"
-    graph["edge_held"] = (
-        arrays[held] if held in arrays else np.zeros(len(graph["edge_alive"]), dtype=bool)
-    )
     graph.update(s["graph"], adjacency=adjacency, absorbed=load_lists(arrays, prefix + "absorbed"))
     closed = arrays[prefix + "clusters.closed_time"].tolist()
     clusters = [
