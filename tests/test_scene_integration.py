@@ -198,11 +198,11 @@ def test_the_links_a_merged_run_rests_on_are_held():
     both are held (no hypothesis may reject them while the merge stands); no map without scene
     integration holds a link."""
     loop = links_alone_lap()
-    for mode, held in (("standard", 0), ("scene_integration", 11)):
+    for mode, holds in (("standard", False), ("scene_integration", True)):
         graph = build(mode, loop.s).graph
         loops = graph.edge_kind[: graph.num_edges_total] == EdgeKind.LOOP_CLOSURE
         assert int(loops.sum()) == 11  # lap 1's closing link and one every 8 steps of lap 2
-        assert graph.edge_held[: graph.num_edges_total].tolist() == (loops & (held > 0)).tolist()
+        assert graph.edge_held[: graph.num_edges_total].tolist() == (loops & holds).tolist()
 
 
 def test_a_run_opened_by_a_rejected_link_is_not_integrated():

@@ -22,7 +22,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
-#include <memory>
 #include <vector>
 
 namespace {
@@ -115,21 +114,23 @@ int main(int argc, char** argv) {
     ceres::Problem problem(problem_options);
     ceres::HuberLoss huber(huber_scale);
     std::vector<double> root_weight(g.m, 1.0);
-    std::vector<std::unique_ptr<EdgeCost>> costs;  // kept to evaluate chi^2 between rounds
+    const double one = 1.0;
+    std::vector<EdgeCost> unweighted(g.m);  // each edge's cost at weight 1: chi^2 between rounds
     bool any_loop = false;
     for (int k = 0; k < g.m; ++k) {
-      auto cost = std::make_unique<EdgeCost>();
+      EdgeCost& cost = unweighted[k];
       for (int a = 0; a < 3; ++a) {
-        cost->z[a] = g.z[3 * k + a];
-        cost->root_information[a] = g.root_information[3 * k + a];
+        cost.z[a] = g.z[3 * k + a];
+        cost.root_information[a] = g.root_information[3 * k + a];
       }
-      cost->root_weight = &root_weight[k];
+      cost.root_weight = &one;
       const int i = static_cast<int>(g.ends[2 * k]), j = static_cast<int>(g.ends[2 * k + 1]);
-      costs.push_back(std::make_unique<EdgeCost>(*cost));
       if (i == j) continue;
       const bool loop = g.loop[k] != 0.0;
       any_loop = any_loop || loop;
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<EdgeCost, 3, 3, 3>(cost.release()),
+      auto* weighted = new EdgeCost(cost);
+      weighted->root_weight = &root_weight[k];
+      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<EdgeCost, 3, 3, 3>(weighted),
                                loop ? nullptr : &huber, &g.poses[3 * i], &g.poses[3 * j]);
     }
     bool gauge = false;
@@ -157,22 +158,18 @@ int main(int argc, char** argv) {
       ++solves;
       iterations += summary.num_successful_steps + summary.num_unsuccessful_steps - 1;
     };
-    if (problem.NumResidualBlocks() == 0) {
-    } else if (!any_loop) {
+    if (problem.NumResidualBlocks() > 0 && !any_loop) {
       solve(max_iterations);
-    } else {
+    } else if (any_loop) {
       double previous = std::numeric_limits<double>::infinity();
       for (int round = 0; round < kMaxReweightings; ++round) {
         // chi^2 of every edge at the current poses (weight 1), the robust cost, the new weights
         double cost = 0.0;
         std::vector<double> chi2(g.m, 0.0);
-        const double one = 1.0;
         for (int k = 0; k < g.m; ++k) {
-          EdgeCost unweighted = *costs[k];
-          unweighted.root_weight = &one;
           const int i = static_cast<int>(g.ends[2 * k]), j = static_cast<int>(g.ends[2 * k + 1]);
           double r[3];
-          unweighted(&g.poses[3 * i], &g.poses[3 * j], r);
+          unweighted[k](&g.poses[3 * i], &g.poses[3 * j], r);
           const double s = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
           chi2[k] = s;
           if (g.loop[k] != 0.0) {
