@@ -54,6 +54,15 @@ def link_heading_weight(link_sigmas: tuple[float, float] | None) -> float:
     return link_sigmas[0] / link_sigmas[1]
 
 
+def information_unit(link_sigmas: tuple[float, float] | None) -> float:
+    """The variance (m²) that weighs 1: a loop closure's position variance (1 for identity).
+
+    An edge of covariance ``C`` (m, rad) weighs ``information_unit * C^-1``, in the unit of
+    :func:`edge_information`.
+    """
+    return 1.0 if link_sigmas is None else link_sigmas[0] ** 2
+
+
 @dataclass(frozen=True)
 class OdometryNoise:
     """How the odometry edges' sigmas are set beyond the model's rates (module doc).

@@ -94,3 +94,47 @@ def relative_to_polar(rel: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArra
     d = np.hypot(rel[..., 0], rel[..., 1])
     heading = np.arctan2(rel[..., 1], rel[..., 0])
     return d, heading, wrap_angle(rel[..., 2])
+
+
+def compose_covariance(
+    a: tuple[float, float, float] | list[float],
+    cov_a: FloatArray,
+    b: tuple[float, float, float] | list[float],
+    cov_b: FloatArray,
+) -> FloatArray:
+    """Covariance of ``a (+) b`` for independent measurements ``a`` and ``b``, to first order.
+
+    Each covariance is in its measurement's own frame, the frame the optimiser's residual uses
+    (:mod:`cogmap_core.optimizer`): a measurement ``(t, theta)`` is perturbed to ``(t +
+    R(theta) dt, theta + dtheta)``. Then ``a (+) b``'s perturbation is ``A da + db`` with ``A =
+    [[R_b^T, R_b^T J t_b], [0, 1]]`` (``J`` the rotation by 90 degrees): ``A cov_a A^T + cov_b``.
+    ``a`` itself does not enter (its frame cancels).
+    """
+    del a
+    jac = _carry_jacobian(b)
+    return jac @ cov_a @ jac.T + cov_b
+
+
+def inverse_covariance(
+    a: tuple[float, float, float] | list[float], cov_a: FloatArray
+) -> FloatArray:
+    """Covariance of ``inverse(a)`` in its own frame (:func:`compose_covariance`'s frames).
+
+    ``inverse(a)``'s perturbation is ``[[-R_a, J t_a], [0, -1]] da``.
+    """
+    c, s = math.cos(a[2]), math.sin(a[2])
+    jac = np.array([[-c, s, -a[1]], [-s, -c, a[0]], [0.0, 0.0, -1.0]])
+    return jac @ cov_a @ jac.T
+
+
+def _carry_jacobian(b: tuple[float, float, float] | list[float]) -> FloatArray:
+    """How a perturbation of ``a`` shows in ``a (+) b``'s frame (:func:`compose_covariance`)."""
+    c, s = math.cos(b[2]), math.sin(b[2])
+    # R_b^T = [[c, s], [-s, c]]; J t_b = (-t_y, t_x)
+    return np.array(
+        [
+            [c, s, -c * b[1] + s * b[0]],
+            [-s, c, s * b[1] + c * b[0]],
+            [0.0, 0.0, 1.0],
+        ]
+    )

@@ -7,7 +7,16 @@ are found without scanning the map. Between two vertices there is at most one li
 
 A vertex the map declined or removed stays addressable as an *alias*: the live vertex that
 absorbed it plus its relative pose in that vertex's frame, so later links to it land exactly where
-the evidence says. This module knows nothing of the paper's mechanisms; they live in
+the evidence says.
+
+An edge is weighed by the noise model (:mod:`~cogmap_core.edge_noise`) unless it carries its own
+covariance (``edge_cov``): a merged revisit run's chain, marginalised onto the two vertices it
+joined (:mod:`~cogmap_core.marginalisation`). Such an *evidence edge* (``edge_evidence``) is a
+measurement, not a corridor -- its two vertices can lie metres apart along a bend -- so it is in
+the optimisation (:meth:`MapGraph.to_pose_graph`) but not in what is drawn, exported as the
+layout or searched as ground (:meth:`MapGraph.path_edges`, :meth:`MapGraph.snapshot`).
+
+This module knows nothing of the paper's mechanisms; they live in
 :mod:`~cogmap_core.neighborhood_fields`, :mod:`~cogmap_core.scene_integration`,
 :mod:`~cogmap_core.short_edges` and :mod:`~cogmap_core.relocalisation`.
 """
@@ -24,10 +33,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from cogmap_core.edge_noise import OdometryNoise, edge_information
+from cogmap_core.edge_noise import OdometryNoise, edge_information, information_unit
 from cogmap_core.errors import EventError, StateError
 from cogmap_core.geometry import (
     compose,
+    compose_covariance,
     compose_scalar,
     inverse_scalar,
     relative_to_polar,
@@ -53,6 +63,9 @@ class EdgeKind(IntEnum):
 @dataclass(frozen=True, slots=True)
 class MapSnapshot:
     """A copy of the live part of the map (for viewers, exporters and reports).
+
+    Its edges are the ground driven (:meth:`MapGraph.path_edges`): the evidence edges, which the
+    optimisation weighs but which are no corridor, are left out.
 
     Edge fields follow OpenRatSLAM: ``d``, ``heading_rad`` and ``facing_rad`` give the relative
     pose of ``edge_to`` in the frame of ``edge_from``; ``edge_rel`` is the same as (dx, dy, dtheta).
@@ -105,13 +118,14 @@ def _edge_rows(
 VERTEX_ARRAYS = ("pose", "vertex_time", "view", "alive", "alias", "alias_offset")
 EDGE_ARRAYS = (
     "edge_from", "edge_to", "edge_rel", "edge_time", "edge_kind", "edge_cluster", "edge_alive",
-    "edge_held",
+    "edge_held", "edge_cov", "edge_evidence",
 )  # fmt: skip
 #: What a new graph's arrays hold past the rows in use.
 _FILL = {"alias": -1, "edge_cluster": -1}
 #: Arrays a state written before they existed lacks (``load_state`` fills them with zeros):
-#: ``edge_held``, the links merges rest on -- none held.
-_ADDED_LATER = ("edge_held",)
+#: ``edge_held``, the links merges rest on -- none held; ``edge_cov`` and ``edge_evidence``, the
+#: merged runs' evidence -- none kept.
+_ADDED_LATER = ("edge_held", "edge_cov", "edge_evidence")
 _INITIAL_CAPACITY = 256
 
 
@@ -168,6 +182,10 @@ class MapGraph:
         self.edge_alive = np.zeros(cap, dtype=bool)
         # edge_held[k]: loop closure k is one a merge rests on (hold_edge)
         self.edge_held = np.zeros(cap, dtype=bool)
+        # edge_cov[k]: the covariance of edge k's measurement (m, rad) where it has its own, else
+        # zeros (the noise model's); edge_evidence[k]: k is a merged run's evidence (module doc)
+        self.edge_cov = np.zeros((cap, 3, 3))
+        self.edge_evidence = np.zeros(cap, dtype=bool)
         self.num_edges_total = 0
         self.adjacency: list[dict[int, int]] = []
         # absorbed[v]: ids whose alias is v (besides v itself), to re-point them on a merge
@@ -264,12 +282,16 @@ class MapGraph:
             self.edge_cluster = grow_array(self.edge_cluster, new, fill=-1)
             self.edge_alive = grow_array(self.edge_alive, new)
             self.edge_held = grow_array(self.edge_held, new)
+            self.edge_cov = grow_array(self.edge_cov, new)
+            self.edge_evidence = grow_array(self.edge_evidence, new)
         self.edge_from[k], self.edge_to[k] = src, dst
         self.edge_rel[k] = (rel[0], rel[1], wrap_scalar(rel[2]))
         self.edge_time[k] = t
         self.edge_kind[k] = kind
         self.edge_cluster[k] = cluster
         self.edge_alive[k] = True
+        self.edge_cov[k] = 0.0
+        self.edge_evidence[k] = False
         self.adjacency[src][dst] = k
         self.adjacency[dst][src] = k
         self.num_edges_total += 1
@@ -292,6 +314,19 @@ class MapGraph:
         if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
             self.num_loop_edges -= 1
 
+    def add_evidence_edge(
+        self, src: int, dst: int, rel: Pose | list[float], cov: FloatArray, t: float, cluster: int
+    ) -> int:
+        """Add an evidence edge ``src -> dst`` (module doc): a loop closure of covariance ``cov``.
+
+        ``cov``: of ``rel`` in its own frame (:func:`~cogmap_core.geometry.compose_covariance`),
+        in metres and radians.
+        """
+        k = self.add_edge(src, dst, rel, t, EdgeKind.LOOP_CLOSURE, cluster)
+        self.edge_cov[k] = cov
+        self.edge_evidence[k] = True
+        return k
+
     def hold_edge(self, k: int) -> None:
         """Mark loop closure ``k`` as one a merge rests on (it stays marked if re-attached).
 
@@ -305,6 +340,11 @@ class MapGraph:
     def live_edges(self) -> IntArray:
         """Indices of the live edges, in creation order."""
         return np.flatnonzero(self.edge_alive[: self.num_edges_total]).astype(np.int64)
+
+    def path_edges(self) -> IntArray:
+        """Indices of the live edges that are ground the robot drove (no evidence edge)."""
+        m = self.num_edges_total
+        return np.flatnonzero(self.edge_alive[:m] & ~self.edge_evidence[:m]).astype(np.int64)
 
     # ------------------------------------------------------------------ merging
     def merge_vertex(self, removed: int, kept: int, offset: Pose | list[float]) -> None:
@@ -329,6 +369,10 @@ class MapGraph:
                 self.edge_rel[k] = compose_scalar(offset, self.edge_rel[k].tolist())
             else:
                 self.edge_to[k] = kept
+                if self.edge_evidence[k]:  # the offset is exact: only the frame changes
+                    self.edge_cov[k] = compose_covariance(
+                        self.edge_rel[k].tolist(), self.edge_cov[k], inv_offset, np.zeros((3, 3))
+                    )
                 self.edge_rel[k] = compose_scalar(self.edge_rel[k].tolist(), inv_offset)
             kept_adjacency[other] = k
             self.adjacency[other][kept] = k
@@ -434,9 +478,9 @@ class MapGraph:
 
     # ------------------------------------------------------------------ views
     def snapshot(self, current_vertex: int, current_pose: FloatArray) -> MapSnapshot:
-        """Copy of the live vertices and edges."""
+        """Copy of the live vertices and the edges of ground driven (:meth:`path_edges`)."""
         ids = self.live_ids()
-        e = self.live_edges()
+        e = self.path_edges()
         return MapSnapshot(
             vertex_ids=ids,
             poses=self.pose[ids].copy(),
@@ -452,6 +496,29 @@ class MapGraph:
             current_pose=current_pose,
         )
 
+    def edge_information(
+        self,
+        edges: IntArray,
+        link_sigmas: tuple[float, float] | None = None,
+        odometry: OdometryNoise | None = None,
+    ) -> FloatArray:
+        """``(len(edges), 3, 3)`` information of edges, as :meth:`to_pose_graph` weighs them."""
+        info = edge_information(self.edge_kind[edges], self.edge_rel[edges], link_sigmas, odometry)
+        own = np.flatnonzero(self.edge_evidence[edges])
+        if own.size:
+            info[own] = information_unit(link_sigmas) * np.linalg.inv(self.edge_cov[edges[own]])
+        return info
+
+    def edge_covariance(
+        self,
+        k: int,
+        link_sigmas: tuple[float, float] | None = None,
+        odometry: OdometryNoise | None = None,
+    ) -> FloatArray:
+        """Covariance of edge ``k``'s measurement (m, rad), as :meth:`to_pose_graph` weighs it."""
+        info = self.edge_information(np.array([k]), link_sigmas, odometry)[0]
+        return information_unit(link_sigmas) * np.linalg.inv(info)
+
     def to_pose_graph(
         self,
         link_sigmas: tuple[float, float] | None = None,
@@ -461,7 +528,8 @@ class MapGraph:
 
         Information is the identity (the paper), or with ``link_sigmas`` (a loop closure's
         position and heading precision) each edge's expected precision, the odometry edges' as
-        ``odometry`` says (:func:`~cogmap_core.edge_noise.edge_information`).
+        ``odometry`` says (:func:`~cogmap_core.edge_noise.edge_information`). An edge with its
+        own covariance weighs as its inverse, in the same unit.
         """
         ids = self.live_ids()
         e = self.live_edges()
@@ -469,15 +537,14 @@ class MapGraph:
         fixed = np.zeros(ids.shape[0], dtype=bool)
         if fixed.size:
             fixed[0] = True
+        information = self.edge_information(e, link_sigmas, odometry)
         return PoseGraph(
             vertex_ids=ids,
             poses=self.pose[ids].copy(),
             edge_from=edge_from,
             edge_to=edge_to,
             measurements=self.edge_rel[e].copy(),
-            information=edge_information(
-                self.edge_kind[e], self.edge_rel[e], link_sigmas, odometry
-            ),
+            information=information,
             fixed=fixed,
             loop_closure=self.edge_kind[e] == EdgeKind.LOOP_CLOSURE,
         )
