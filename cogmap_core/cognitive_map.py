@@ -148,7 +148,7 @@ class CognitiveMap:
         self.params = params or MapParams()
         self.clusterer = LoopClosureClusterer(self.params.t_interval, self.params.t_total)
         self.graph = MapGraph()
-        self.integration = SceneIntegration()
+        self.integration = SceneIntegration(keeps_evidence=self.mode is MapMode.SCENE_INTEGRATION)
         self.counters = MapCounters()
         self.gate = RelocalisationGate()
         # robot state: current vertex, motion accumulated in its frame, distance driven since
@@ -178,7 +178,7 @@ class CognitiveMap:
 
     @property
     def num_edges(self) -> int:
-        """Live edges."""
+        """Live edges, evidence edges included (those the optimisation weighs)."""
         return self.graph.num_edges
 
     @property
@@ -187,11 +187,14 @@ class CognitiveMap:
         return self.graph.num_loop_edges
 
     def rejected_loop_edges(self) -> NDArray[np.bool_]:
-        """Per live edge (:meth:`snapshot` order), whether the loop model rejects it now.
+        """Per edge of :meth:`snapshot` (in its order), whether the loop model rejects it now.
 
-        (:func:`~cogmap_core.optimizer.rejected_loop_closures` at the map's current estimate.)
+        (:func:`~cogmap_core.optimizer.rejected_loop_closures` at the map's current estimate;
+        the evidence edges, which the snapshot leaves out, are left out here too.)
         """
-        return rejected_loop_closures(self.to_pose_graph(), self.params.loop_closure_model())
+        rejected = rejected_loop_closures(self.to_pose_graph(), self.params.loop_closure_model())
+        graph = self.graph
+        return rejected[~graph.edge_evidence[graph.live_edges()]]
 
     @property
     def declined_vertices(self) -> int:
@@ -322,7 +325,7 @@ class CognitiveMap:
         return compose(self.graph.pose[target], offset)
 
     def snapshot(self) -> MapSnapshot:
-        """Copy of the live vertices and edges."""
+        """Copy of the live vertices and edges (no evidence edge: :class:`MapSnapshot`)."""
         return self.graph.snapshot(self._current, self.current_pose())
 
     def to_pose_graph(self) -> PoseGraph:

@@ -91,6 +91,10 @@ class MapParams:
             closure whose two ends the optimisation brought together, like any edge; 0 (a
             log's default): never, so that the loop model can still reject the link at a later
             optimisation (:mod:`~cogmap_core.short_edges`).
+        integration_keeps_evidence: 1 (default): the scene-integration map keeps what a merged
+            revisit run measured -- its chain of edges, marginalised onto the run's two ends
+            (:mod:`~cogmap_core.marginalisation`) -- instead of dropping it; 0: the paper's
+            merge. Measured on 12 bags and the generated and real logs (``docs/maps.md``).
 
     """
 
@@ -118,6 +122,7 @@ class MapParams:
     odometry_step_length: float = 0.0
     odometry_step_turn: float = 0.0
     short_edge_loops: float = 1.0
+    integration_keeps_evidence: float = 1.0
 
     def __post_init__(self) -> None:
         """Reject values outside each parameter's valid range."""

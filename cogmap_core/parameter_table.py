@@ -101,6 +101,7 @@ def flag_name(name: str) -> str:
 _EVERY_MAP = frozenset(ALL_MODES)
 _INTEGRATING = frozenset({MapMode.SCENE_INTEGRATION, MapMode.COMPACT})
 _COMPACT = frozenset({MapMode.COMPACT})
+_SCENE_INTEGRATION = frozenset({MapMode.SCENE_INTEGRATION})
 
 MAP_PARAMETERS: tuple[MapParameter, ...] = (
     MapParameter(
@@ -332,6 +333,16 @@ MAP_PARAMETERS: tuple[MapParameter, ...] = (
         meaning="1: short-edge removal contracts loop closures too (the paper); 0: never",
         valid=(0.0, True, 1.0),
         maps=_COMPACT,
+        whole_number=True,
+    ),
+    MapParameter(
+        name="integration_keeps_evidence",
+        meaning=(
+            "1: a merged revisit run's chain is kept, marginalised onto its two ends; "
+            "0: dropped (the paper)"
+        ),
+        valid=(0.0, True, 1.0),
+        maps=_SCENE_INTEGRATION,
         whole_number=True,
     ),
 )

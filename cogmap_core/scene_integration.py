@@ -34,6 +34,13 @@ with the current (optimised) relative pose. The links that bracket a merged run 
 (``MapGraph.hold_edge``): the merge rests on them, so no later optimisation's hypothesis may
 reject them while it stands (:func:`~cogmap_core.cluster_consistency.overrules_a_merge`).
 
+**Keeping what the run measured** (``MapParams.integration_keeps_evidence``, the
+scene-integration map; beyond the paper). The run's chain from ``start`` to ``end`` is
+marginalised onto those two vertices (:mod:`~cogmap_core.marginalisation`) and replaces its
+re-attached edges: an evidence edge, held in the links' place. The compact map merges its runs
+the paper's way: there the chain runs through its declined vertices' fixed offsets, and keeping
+it made the compact map less accurate (``docs/maps.md``).
+
 Nothing else is ever removed: a first-visit vertex belongs to no run that starts on known ground
 and passes 3 -- not even the last one before a loop closes, a few centimetres short of the place
 the robot then recognises -- and the vertex where the robot leaves known ground begins a run
@@ -68,6 +75,7 @@ from cogmap_core.config import MapParams
 from cogmap_core.edge_noise import link_heading_weight
 from cogmap_core.geometry import between, compose_scalar, wrap_scalar
 from cogmap_core.map_graph import MapGraph
+from cogmap_core.marginalisation import ChainMeasurement, chain_measurement, keep_chain_evidence
 
 
 @dataclass(slots=True)
@@ -136,8 +144,8 @@ class KnownEdges:
     """
 
     def __init__(self, graph: MapGraph, radius: float) -> None:
-        """Index every live edge of ``graph``."""
-        edges = graph.live_edges()
+        """Index every edge of driven ground of ``graph`` (:meth:`MapGraph.path_edges`)."""
+        edges = graph.path_edges()
         a_id, b_id = graph.edge_from[edges], graph.edge_to[edges]
         a, b = graph.pose[a_id, :2], graph.pose[b_id, :2]
         piece = max(radius, 1e-3)
@@ -205,8 +213,13 @@ class KnownEdges:
 class SceneIntegration:
     """Collects revisit runs as events arrive and merges the redundant ones (module doc)."""
 
-    def __init__(self) -> None:
-        """No run yet."""
+    def __init__(self, keeps_evidence: bool = False) -> None:
+        """No run yet.
+
+        ``keeps_evidence``: this map keeps a merged run's chain when
+        ``MapParams.integration_keeps_evidence`` says so (module doc).
+        """
+        self.keeps_evidence = keeps_evidence
         self.open: RevisitRun | None = None
         self.pending: list[RevisitRun] = []
         self._known: KnownEdges | None = None
@@ -316,16 +329,41 @@ class SceneIntegration:
             gaps = np.hypot(*(graph.pose[[u, w], :2] - graph.pose[v, :2]).T)
             absorbers.append(u if gaps[0] <= gaps[1] else w)
         links = _bracketing_links(graph, run)
+        chain = self._run_chain(graph, run, members, params)
         merged = 0
         for v, kept in zip(members, absorbers, strict=True):
             kept = graph.resolve(kept)[0]
             if graph.alive[v] and kept != v:
                 _merge(graph, v, kept)
                 merged += 1
+        if chain is not None and merged == len(members):  # (every vertex of the run is gone)
+            ends = graph.resolve(chain.first)[0], graph.resolve(run.end)[0]
+            evidence = keep_chain_evidence(graph, *ends, chain, run.closed)
+            links = [k for k in (evidence, _opening_link(graph, run)) if k >= 0]
         if merged:
             for k in links:
                 graph.hold_edge(k)
         return merged
+
+    def _run_chain(
+        self, graph: MapGraph, run: RevisitRun, members: list[int], params: MapParams
+    ) -> ChainMeasurement | None:
+        """What a closed run measured, when this map keeps it.
+
+        Its chain of edges from the vertex its first vertex hangs off (``start``, or where a link
+        alone re-localised the robot, the vertex that link came from: the link itself stays) to
+        ``end``.
+
+        None when the map does not keep it, when a vertex of the run is gone already or when the
+        chain lacks an edge (the closing link duplicated one).
+        """
+        if not self.keeps_evidence or params.integration_keeps_evidence < 0.5:
+            return None
+        if len(members) != len(run.vertices):
+            return None
+        first = run.opened_from if run.opened_from >= 0 else run.start
+        chain = [graph.resolve(first)[0], *members, graph.resolve(run.end)[0]]
+        return chain_measurement(graph, chain, params.link_sigmas(), params.odometry_noise())
 
 
 def _bracketing_links(graph: MapGraph, run: RevisitRun) -> list[int]:

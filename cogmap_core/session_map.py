@@ -110,7 +110,7 @@ def load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
         pairs = zip(neighbours[start : start + c], edges[start : start + c], strict=True)
         adjacency.append(dict(pairs))
         start += c
-    # (graph.edge_held is absent from older files: MapGraph.load_state holds none)
+    # (graph arrays added later are absent from older files: MapGraph.load_state fills them)
     graph: Json = {
         name: arrays[prefix + "graph." + name]
         for name in (*VERTEX_ARRAYS, *EDGE_ARRAYS)

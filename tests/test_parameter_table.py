@@ -54,7 +54,8 @@ def test_every_row_is_consistent():
         low, _, high = p.valid
         assert low < high, p.name
         assert p.maps and p.maps <= set(ALL_MODES), p.name
-        assert MapMode.COMPACT in p.maps, p.name  # the compact map depends on every parameter
+        # the compact map depends on every parameter but the scene-integration map's own
+        assert (MapMode.COMPACT in p.maps) != (p.name == "integration_keeps_evidence"), p.name
         if p.slider is not None:
             assert p.label, p.name
             assert p.slider.low < p.slider.high and p.slider.step > 0, p.name
@@ -125,8 +126,15 @@ def test_the_valid_ranges_and_meanings_are_as_before():
             1.0,
             "1: short-edge removal contracts loop closures too (the paper); 0: never",
         ),
+        "integration_keeps_evidence": (
+            0.0,
+            True,
+            1.0,
+            "1: a merged revisit run's chain is kept, marginalised onto its two ends; "
+            "0: dropped (the paper)",
+        ),
     }
-    assert config._WHOLE_NUMBERS == {"loop_model", "short_edge_loops"}
+    assert config._WHOLE_NUMBERS == {"loop_model", "short_edge_loops", "integration_keeps_evidence"}
     assert config.parameter_range("delta") == (1.0, False, 1e12)
     with pytest.raises(ParameterError, match=r"^loop_model=1\.5 is out of range: robust"):
         MapParams(loop_model=1.5)
@@ -214,8 +222,10 @@ def test_the_maps_each_parameter_affects_are_as_before():
     integration = {"integration_radius", "integration_max_residual", "integration_min_age"}
     assert PARAMS_USED == {
         MapMode.STANDARD: clustering_and_optimisation,
-        MapMode.SCENE_INTEGRATION: clustering_and_optimisation | integration,
-        MapMode.COMPACT: set(MapParams().to_dict()),
+        MapMode.SCENE_INTEGRATION: clustering_and_optimisation
+        | integration
+        | {"integration_keeps_evidence"},
+        MapMode.COMPACT: set(MapParams().to_dict()) - {"integration_keeps_evidence"},
     }
     assert list(PARAMS_USED) == list(ALL_MODES)
     assert PARAMS_USED is PARAMETERS_USED and replay.PARAMS_USED is PARAMETERS_USED

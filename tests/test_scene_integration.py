@@ -25,6 +25,7 @@ SIDE = 20  # steps per side of the 1 m square
 LAP = 4 * SIDE
 DT = 0.2  # s per step: a lap takes 16 s, more than integration_min_age (10 s)
 NO_GATE = {"gate_position": 1e9, "gate_heading": 1e9}
+PAPER_MERGE = {"integration_keeps_evidence": 0.0}  # a merged run's edges re-attached, no more
 
 
 class SquareLoop:
@@ -111,7 +112,7 @@ def test_revisit_vertex_merges_into_the_old_place_case_a():
     v = loop.new[0]
     standard = build("standard", loop.s)
     assert v in alive(standard)
-    cmap = build("scene_integration", loop.s)
+    cmap = build("scene_integration", loop.s, **PAPER_MERGE)
     assert alive(cmap) == loop.first
     kept, offset = cmap.resolve(v)
     assert kept == loop.first[33]
@@ -119,6 +120,22 @@ def test_revisit_vertex_merges_into_the_old_place_case_a():
     assert cmap.integrated_vertices == 1
     # the sequential edge into the revisit and its loop closure collapse onto the old edges
     assert cmap.num_edges == LAP  # the lap's 80 sequential edges, the closing edge 79 -> 0
+
+
+def test_a_merged_revisit_vertex_leaves_its_chain_as_evidence():
+    """Case A with the run's evidence kept: its two edges 32 -> v -> 34, composed, join 32 and
+    34 -- optimised, held, not drawn."""
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.known_lap(propose={33})
+    cmap = build("scene_integration", loop.s)
+    assert alive(cmap) == loop.first and cmap.integrated_vertices == 1
+    assert cmap.num_edges == LAP + 1 and len(cmap.snapshot().edge_from) == LAP
+    graph = cmap.graph
+    k = graph.edge_between(loop.first[32], loop.first[34])
+    assert graph.edge_evidence[k] and graph.edge_held[k] and graph.edge_from[k] == loop.first[32]
+    truth = between(loop.s.truth[loop.first[32]], loop.s.truth[loop.first[34]])
+    np.testing.assert_allclose(graph.edge_rel[k], truth, atol=1e-9)  # exact odometry
 
 
 def test_several_revisit_vertices_onto_one_old_vertex_case_b():
@@ -143,12 +160,15 @@ def test_chain_of_revisit_vertices_removed_case_c():
     loop = SquareLoop()
     loop.first_lap()
     loop.known_lap(chains=set(range(44, 56)))  # twelve proposals in a row, then recognised
-    cmap = build("scene_integration", loop.s)
+    cmap = build("scene_integration", loop.s, **PAPER_MERGE)
     assert alive(cmap) == loop.first
     assert [cmap.resolve(v)[0] for v in loop.new] == [loop.first[p] for p in range(44, 56)]
     assert cmap.num_loop_edges == 1  # only the lap's closing link 79 -> 0 is left
     standard = build("standard", loop.s)
     assert standard.num_vertices == LAP + 12
+    kept = build("scene_integration", loop.s)  # the twelve's chain 43 -> ... -> 56 kept
+    assert alive(kept) == loop.first and kept.num_loop_edges == 2
+    assert kept.graph.edge_evidence[kept.graph.edge_between(loop.first[43], loop.first[56])]
 
 
 def test_revisits_recognised_by_links_alone_are_integrated():
@@ -199,10 +219,34 @@ def test_the_links_a_merged_run_rests_on_are_held():
     integration holds a link."""
     loop = links_alone_lap()
     for mode, holds in (("standard", False), ("scene_integration", True)):
-        graph = build(mode, loop.s).graph
+        graph = build(mode, loop.s, **PAPER_MERGE).graph
         loops = graph.edge_kind[: graph.num_edges_total] == EdgeKind.LOOP_CLOSURE
         assert int(loops.sum()) == 11  # lap 1's closing link and one every 8 steps of lap 2
         assert graph.edge_held[: graph.num_edges_total].tolist() == (loops & holds).tolist()
+
+
+def test_with_the_runs_evidence_kept_the_evidence_is_held_in_the_closing_links_place():
+    """Each run between two links, merged, leaves one evidence edge from the vertex its first
+    vertex hung off to the place its closing link named, held; the link that opened it stays,
+    held too (lap 1's closing link 79 -> 0 opened the first run)."""
+    loop = links_alone_lap()
+    graph = build("scene_integration", loop.s).graph
+    live = graph.edge_alive[: graph.num_edges_total]
+    evidence = graph.edge_evidence[: graph.num_edges_total] & live
+    ends = sorted(
+        (int(graph.edge_from[k]), int(graph.edge_to[k])) for k in np.flatnonzero(evidence)
+    )
+    # each run after the first hangs off the vertex the previous run's last one merged into
+    first = loop.first
+    assert ends == sorted(
+        [(first[79], first[8])] + [(first[p - 2], first[(p + 8) % LAP]) for p in range(8, LAP, 8)]
+    )
+    links = live & ~evidence & (graph.edge_kind[: graph.num_edges_total] == EdgeKind.LOOP_CLOSURE)
+    assert [(int(graph.edge_from[k]), int(graph.edge_to[k])) for k in np.flatnonzero(links)] == [
+        (first[79], first[0])
+    ]
+    held = graph.edge_held[: graph.num_edges_total] & live
+    assert held.tolist() == (evidence | links).tolist()
 
 
 def test_a_run_opened_by_a_rejected_link_is_not_integrated():

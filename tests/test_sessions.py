@@ -331,6 +331,34 @@ def test_a_file_from_before_held_links_loads_with_none_held(resumed: Path, tmp_p
     assert same_state(new, old)
 
 
+def test_a_file_from_before_kept_evidence_loads_with_none_kept(
+    resumed: Path, tmp_path: Path
+) -> None:
+    """``map.<mode>.graph.edge_cov`` and ``edge_evidence`` are absent from older files: the maps
+    load with no evidence edge and no edge of its own covariance."""
+    session = resumed / "day1.session.npz"
+    added = (".edge_cov", ".edge_evidence")
+    with np.load(session) as data:
+        arrays = {name: data[name] for name in data.files if not name.endswith(added)}
+    header = json.loads(str(arrays["header"]))
+    header["arrays"] = {k: v for k, v in header["arrays"].items() if not k.endswith(added)}
+    arrays["header"] = np.asarray(json.dumps(header))
+    older = tmp_path / "older.npz"
+    np.savez(older, **arrays)
+    new, _ = load_session(session)
+    old, _ = load_session(older)
+    evidence = {m: new.maps[m].graph.edge_evidence for m in new.maps.maps}
+    covariance = {m: new.maps[m].graph.edge_cov for m in new.maps.maps}
+    assert evidence[MapMode.SCENE_INTEGRATION].any()
+    assert not evidence[MapMode.STANDARD].any() and not evidence[MapMode.COMPACT].any()
+    for mode, cmap in old.maps.maps.items():
+        graph = cmap.graph
+        assert graph.edge_evidence.shape == evidence[mode].shape
+        assert not graph.edge_evidence.any() and not graph.edge_cov.any()
+        graph.edge_evidence, graph.edge_cov = evidence[mode].copy(), covariance[mode].copy()
+    assert same_state(new, old)
+
+
 @pytest.mark.parametrize("counter", ["proposed", "integrated", "refused_relocalisations"])
 def test_counters_that_do_not_add_up_are_refused(
     counter: str, resumed: Path, tmp_path: Path
@@ -491,6 +519,8 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "edge_cluster",
         "edge_alive",
         "edge_held",
+        "edge_cov",
+        "edge_evidence",
         "num_edges_total",
         "adjacency",
         "_absorbed",
@@ -502,7 +532,8 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "revision",
         "path_search",
     },  # fmt: skip
-    SceneIntegration: {"open", "pending", "_known", "_relocalised_at"},
+    # (keeps_evidence: the map's mode decides it when the map is made, not saved)
+    SceneIntegration: {"open", "pending", "_known", "_relocalised_at", "keeps_evidence"},
     EventLog: {
         "_n_events",
         "_n_frames",

@@ -44,8 +44,8 @@ class LinkCounts:
         duplicates: links that joined a pair already joined (or the vertex the robot is at).
         refused: links its relocalisation test refused.
         made: loop-closure edges it made of them (``links - duplicates - refused``).
-        removed: edges of those it holds no more (merged by scene integration, or removed
-            with a short edge's vertex).
+        removed: edges of those it holds no more as drawn edges (merged by scene integration,
+            or folded into a merged run's evidence edge, or removed with a short edge's vertex).
 
     """
 

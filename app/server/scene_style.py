@@ -136,18 +136,20 @@ def yaw_to_wxyz(theta: float) -> tuple[float, float, float, float]:
 
 
 def edge_errors(cmap: CognitiveMap) -> FloatArray:
-    """Per live edge (snapshot order), the norm of its whitened residual at the current poses.
+    """Per edge of the map's snapshot (in its order), its whitened residual's norm now.
 
-    This is what the optimiser weighs (before the Huber loss): about 1 for an edge off by one
-    standard deviation of its noise model.
+    At the current poses. This is what the optimiser weighs (before the Huber loss): about 1
+    for an edge off by one standard deviation of its noise model. (The evidence edges, which
+    the snapshot leaves out, are left out here too.)
     """
     graph = cmap.to_pose_graph()
     if graph.num_edges == 0:
         return np.zeros(0)
     x = graph.poses
-    return _whitened_norms(
+    norms = _whitened_norms(
         x[graph.edge_from], x[graph.edge_to], graph.measurements, graph.information
     )
+    return norms[~cmap.graph.edge_evidence[cmap.graph.live_edges()]]
 
 
 def edge_error(
