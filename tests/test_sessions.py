@@ -310,16 +310,21 @@ def test_another_format_version_is_refused(
     assert len(err.splitlines()) == 1 and not out.exists()
 
 
+def older_file(session: Path, out: Path, absent: tuple[str, ...]) -> Path:
+    """``session`` as a file written before the arrays ending in ``absent`` existed."""
+    with np.load(session) as data:
+        arrays = {name: data[name] for name in data.files if not name.endswith(absent)}
+    header = json.loads(str(arrays["header"]))
+    header["arrays"] = {k: v for k, v in header["arrays"].items() if not k.endswith(absent)}
+    arrays["header"] = np.asarray(json.dumps(header))
+    np.savez(out, **arrays)
+    return out
+
+
 def test_a_file_from_before_held_links_loads_with_none_held(resumed: Path, tmp_path: Path) -> None:
     """``map.<mode>.graph.edge_held`` is absent from older files: the maps load without it."""
     session = resumed / "day1.session.npz"
-    with np.load(session) as data:
-        arrays = {name: data[name] for name in data.files if not name.endswith(".edge_held")}
-    header = json.loads(str(arrays["header"]))
-    header["arrays"] = {k: v for k, v in header["arrays"].items() if not k.endswith(".edge_held")}
-    arrays["header"] = np.asarray(json.dumps(header))
-    older = tmp_path / "older.npz"
-    np.savez(older, **arrays)
+    older = older_file(session, tmp_path / "older.npz", (".edge_held",))
     new, _ = load_session(session)
     old, _ = load_session(older)
     held = {m: new.maps[m].graph.edge_held for m in new.maps.maps}
@@ -337,14 +342,7 @@ def test_a_file_from_before_kept_evidence_loads_with_none_kept(
     """``map.<mode>.graph.edge_cov`` and ``edge_evidence`` are absent from older files: the maps
     load with no evidence edge and no edge of its own covariance."""
     session = resumed / "day1.session.npz"
-    added = (".edge_cov", ".edge_evidence")
-    with np.load(session) as data:
-        arrays = {name: data[name] for name in data.files if not name.endswith(added)}
-    header = json.loads(str(arrays["header"]))
-    header["arrays"] = {k: v for k, v in header["arrays"].items() if not k.endswith(added)}
-    arrays["header"] = np.asarray(json.dumps(header))
-    older = tmp_path / "older.npz"
-    np.savez(older, **arrays)
+    older = older_file(session, tmp_path / "older.npz", (".edge_cov", ".edge_evidence"))
     new, _ = load_session(session)
     old, _ = load_session(older)
     evidence = {m: new.maps[m].graph.edge_evidence for m in new.maps.maps}
