@@ -193,8 +193,7 @@ class CognitiveMap:
         the evidence edges, which the snapshot leaves out, are left out here too.)
         """
         rejected = rejected_loop_closures(self.to_pose_graph(), self.params.loop_closure_model())
-        graph = self.graph
-        return rejected[~graph.edge_evidence[graph.live_edges()]]
+        return rejected[self.graph.path_rows()]
 
     @property
     def declined_vertices(self) -> int:

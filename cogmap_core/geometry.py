@@ -97,10 +97,7 @@ def relative_to_polar(rel: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArra
 
 
 def compose_covariance(
-    a: tuple[float, float, float] | list[float],
-    cov_a: FloatArray,
-    b: tuple[float, float, float] | list[float],
-    cov_b: FloatArray,
+    cov_a: FloatArray, b: tuple[float, float, float] | list[float], cov_b: FloatArray
 ) -> FloatArray:
     """Covariance of ``a (+) b`` for independent measurements ``a`` and ``b``, to first order.
 
@@ -110,7 +107,6 @@ def compose_covariance(
     [[R_b^T, R_b^T J t_b], [0, 1]]`` (``J`` the rotation by 90 degrees): ``A cov_a A^T + cov_b``.
     ``a`` itself does not enter (its frame cancels).
     """
-    del a
     jac = _carry_jacobian(b)
     return jac @ cov_a @ jac.T + cov_b
 

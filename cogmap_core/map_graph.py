@@ -118,14 +118,14 @@ def _edge_rows(
 VERTEX_ARRAYS = ("pose", "vertex_time", "view", "alive", "alias", "alias_offset")
 EDGE_ARRAYS = (
     "edge_from", "edge_to", "edge_rel", "edge_time", "edge_kind", "edge_cluster", "edge_alive",
-    "edge_held", "edge_cov", "edge_evidence",
+    "edge_held", "edge_cov",
 )  # fmt: skip
 #: What a new graph's arrays hold past the rows in use.
 _FILL = {"alias": -1, "edge_cluster": -1}
 #: Arrays a state written before they existed lacks (``load_state`` fills them with zeros):
-#: ``edge_held``, the links merges rest on -- none held; ``edge_cov`` and ``edge_evidence``, the
-#: merged runs' evidence -- none kept.
-_ADDED_LATER = ("edge_held", "edge_cov", "edge_evidence")
+#: ``edge_held``, the links merges rest on -- none held; ``edge_cov``, the merged runs' evidence
+#: -- none kept.
+_ADDED_LATER = ("edge_held", "edge_cov")
 _INITIAL_CAPACITY = 256
 
 
@@ -182,10 +182,9 @@ class MapGraph:
         self.edge_alive = np.zeros(cap, dtype=bool)
         # edge_held[k]: loop closure k is one a merge rests on (hold_edge)
         self.edge_held = np.zeros(cap, dtype=bool)
-        # edge_cov[k]: the covariance of edge k's measurement (m, rad) where it has its own, else
-        # zeros (the noise model's); edge_evidence[k]: k is a merged run's evidence (module doc)
+        # edge_cov[k]: the covariance of edge k's measurement (m, rad) where it is an evidence
+        # edge (module doc; its variances are positive), else zeros (the noise model weighs it)
         self.edge_cov = np.zeros((cap, 3, 3))
-        self.edge_evidence = np.zeros(cap, dtype=bool)
         self.num_edges_total = 0
         self.adjacency: list[dict[int, int]] = []
         # absorbed[v]: ids whose alias is v (besides v itself), to re-point them on a merge
@@ -283,7 +282,6 @@ class MapGraph:
             self.edge_alive = grow_array(self.edge_alive, new)
             self.edge_held = grow_array(self.edge_held, new)
             self.edge_cov = grow_array(self.edge_cov, new)
-            self.edge_evidence = grow_array(self.edge_evidence, new)
         self.edge_from[k], self.edge_to[k] = src, dst
         self.edge_rel[k] = (rel[0], rel[1], wrap_scalar(rel[2]))
         self.edge_time[k] = t
@@ -291,7 +289,6 @@ class MapGraph:
         self.edge_cluster[k] = cluster
         self.edge_alive[k] = True
         self.edge_cov[k] = 0.0
-        self.edge_evidence[k] = False
         self.adjacency[src][dst] = k
         self.adjacency[dst][src] = k
         self.num_edges_total += 1
@@ -324,7 +321,6 @@ class MapGraph:
         """
         k = self.add_edge(src, dst, rel, t, EdgeKind.LOOP_CLOSURE, cluster)
         self.edge_cov[k] = cov
-        self.edge_evidence[k] = True
         return k
 
     def hold_edge(self, k: int) -> None:
@@ -341,10 +337,22 @@ class MapGraph:
         """Indices of the live edges, in creation order."""
         return np.flatnonzero(self.edge_alive[: self.num_edges_total]).astype(np.int64)
 
+    @property
+    def edge_evidence(self) -> NDArray[np.bool_]:
+        """Per edge index (the arrays' capacity), whether it is an evidence edge (module doc)."""
+        return self.edge_cov[:, 0, 0] > 0
+
     def path_edges(self) -> IntArray:
         """Indices of the live edges that are ground the robot drove (no evidence edge)."""
         m = self.num_edges_total
-        return np.flatnonzero(self.edge_alive[:m] & ~self.edge_evidence[:m]).astype(np.int64)
+        return np.flatnonzero(self.edge_alive[:m] & (self.edge_cov[:m, 0, 0] <= 0)).astype(np.int64)
+
+    def path_rows(self) -> NDArray[np.bool_]:
+        """Per edge of :meth:`to_pose_graph` (in its order), whether :meth:`snapshot` has it.
+
+        For figures computed on the pose graph and shown on the snapshot's edges.
+        """
+        return self.edge_cov[self.live_edges(), 0, 0] <= 0
 
     # ------------------------------------------------------------------ merging
     def merge_vertex(self, removed: int, kept: int, offset: Pose | list[float]) -> None:
@@ -369,9 +377,9 @@ class MapGraph:
                 self.edge_rel[k] = compose_scalar(offset, self.edge_rel[k].tolist())
             else:
                 self.edge_to[k] = kept
-                if self.edge_evidence[k]:  # the offset is exact: only the frame changes
+                if self.edge_cov[k, 0, 0] > 0:  # evidence; the offset is exact: only its frame
                     self.edge_cov[k] = compose_covariance(
-                        self.edge_rel[k].tolist(), self.edge_cov[k], inv_offset, np.zeros((3, 3))
+                        self.edge_cov[k], inv_offset, np.zeros((3, 3))
                     )
                 self.edge_rel[k] = compose_scalar(self.edge_rel[k].tolist(), inv_offset)
             kept_adjacency[other] = k
@@ -504,20 +512,26 @@ class MapGraph:
     ) -> FloatArray:
         """``(len(edges), 3, 3)`` information of edges, as :meth:`to_pose_graph` weighs them."""
         info = edge_information(self.edge_kind[edges], self.edge_rel[edges], link_sigmas, odometry)
-        own = np.flatnonzero(self.edge_evidence[edges])
+        own = np.flatnonzero(self.edge_cov[edges, 0, 0] > 0)
         if own.size:
             info[own] = information_unit(link_sigmas) * np.linalg.inv(self.edge_cov[edges[own]])
         return info
 
-    def edge_covariance(
+    def edge_covariances(
         self,
-        k: int,
+        edges: IntArray,
         link_sigmas: tuple[float, float] | None = None,
         odometry: OdometryNoise | None = None,
     ) -> FloatArray:
-        """Covariance of edge ``k``'s measurement (m, rad), as :meth:`to_pose_graph` weighs it."""
-        info = self.edge_information(np.array([k]), link_sigmas, odometry)[0]
-        return information_unit(link_sigmas) * np.linalg.inv(info)
+        """``(len(edges), 3, 3)`` covariances (m, rad) of edges, as the pose graph weighs them.
+
+        An evidence edge's own; else the inverse of the noise model's information.
+        """
+        info = edge_information(self.edge_kind[edges], self.edge_rel[edges], link_sigmas, odometry)
+        cov = information_unit(link_sigmas) * np.linalg.inv(info)
+        own = self.edge_cov[edges, 0, 0] > 0
+        cov[own] = self.edge_cov[edges[own]]
+        return cov
 
     def to_pose_graph(
         self,

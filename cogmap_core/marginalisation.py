@@ -71,23 +71,22 @@ def chain_measurement(
 ) -> ChainMeasurement | None:
     """The edges joining consecutive ``vertices``, composed; None where two are not joined.
 
-    Each edge weighs as the optimisation weighs it (:meth:`MapGraph.edge_covariance`), read in
+    Each edge weighs as the optimisation weighs it (:meth:`MapGraph.edge_covariances`), read in
     the direction of the chain.
     """
+    pairs = list(zip(vertices[:-1], vertices[1:], strict=True))
+    edges = [graph.edge_between(a, b) if a != b else -1 for a, b in pairs]
+    if min(edges) < 0:
+        return None
     relative: Pose = (0.0, 0.0, 0.0)
     covariance = np.zeros((3, 3))
-    edges = []
-    for a, b in zip(vertices[:-1], vertices[1:], strict=True):
-        k = graph.edge_between(a, b) if a != b else -1
-        if k < 0:
-            return None
+    steps = graph.edge_covariances(np.array(edges), link_sigmas, odometry)
+    for (a, _), k, step_cov in zip(pairs, edges, steps, strict=True):
         step: Pose = tuple(graph.edge_rel[k].tolist())  # type: ignore[assignment]
-        step_cov = graph.edge_covariance(k, link_sigmas, odometry)
         if int(graph.edge_from[k]) != a:
             step, step_cov = inverse_scalar(step), inverse_covariance(step, step_cov)
-        covariance = compose_covariance(relative, covariance, step, step_cov)
+        covariance = compose_covariance(covariance, step, step_cov)
         relative = compose_scalar(relative, step)
-        edges.append(k)
     return ChainMeasurement(int(vertices[0]), relative, covariance, tuple(edges))
 
 

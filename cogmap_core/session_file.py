@@ -27,8 +27,7 @@ them all with shape and dtype, and a file whose members do not match it is refus
 written to a temporary name beside the target and renamed when complete. ``log.score`` (each
 link's place-recognition score, NaN where none) may be absent: files written before it existed
 load with no scores; ``map.<mode>.graph.edge_held`` (the links merges rest on) likewise, with
-none held, and ``map.<mode>.graph.edge_cov`` and ``edge_evidence`` (merged runs' evidence), with
-none kept.
+none held, and ``map.<mode>.graph.edge_cov`` (merged runs' evidence), with none kept.
 """
 
 from __future__ import annotations

@@ -67,7 +67,7 @@ def test_composed_covariance_is_the_first_order_propagation():
     jac_a = _numeric_jacobian(lambda z: compose_scalar(z, b), a)
     jac_b = _numeric_jacobian(lambda z: compose_scalar(a, z), b)
     expected = jac_a @ COV_A @ jac_a.T + jac_b @ COV_B @ jac_b.T
-    np.testing.assert_allclose(compose_covariance(a, COV_A, b, COV_B), expected, atol=1e-12)
+    np.testing.assert_allclose(compose_covariance(COV_A, b, COV_B), expected, atol=1e-12)
     np.testing.assert_allclose(jac_b, np.eye(3), atol=1e-9)  # b's own frame is the result's
 
 

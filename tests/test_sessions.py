@@ -339,10 +339,10 @@ def test_a_file_from_before_held_links_loads_with_none_held(resumed: Path, tmp_p
 def test_a_file_from_before_kept_evidence_loads_with_none_kept(
     resumed: Path, tmp_path: Path
 ) -> None:
-    """``map.<mode>.graph.edge_cov`` and ``edge_evidence`` are absent from older files: the maps
-    load with no evidence edge and no edge of its own covariance."""
+    """``map.<mode>.graph.edge_cov`` is absent from older files: the maps load with no evidence
+    edge."""
     session = resumed / "day1.session.npz"
-    older = older_file(session, tmp_path / "older.npz", (".edge_cov", ".edge_evidence"))
+    older = older_file(session, tmp_path / "older.npz", (".edge_cov",))
     new, _ = load_session(session)
     old, _ = load_session(older)
     evidence = {m: new.maps[m].graph.edge_evidence for m in new.maps.maps}
@@ -353,7 +353,7 @@ def test_a_file_from_before_kept_evidence_loads_with_none_kept(
         graph = cmap.graph
         assert graph.edge_evidence.shape == evidence[mode].shape
         assert not graph.edge_evidence.any() and not graph.edge_cov.any()
-        graph.edge_evidence, graph.edge_cov = evidence[mode].copy(), covariance[mode].copy()
+        graph.edge_cov = covariance[mode].copy()
     assert same_state(new, old)
 
 
@@ -518,7 +518,6 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "edge_alive",
         "edge_held",
         "edge_cov",
-        "edge_evidence",
         "num_edges_total",
         "adjacency",
         "_absorbed",

@@ -111,7 +111,6 @@ def test_a_graph_s_state_is_its_rows_in_use_adjacency_and_aliases() -> None:
             "edge_alive": np.array([True]),
             "edge_held": np.array([False]),
             "edge_cov": np.zeros((1, 3, 3)),
-            "edge_evidence": np.array([False]),
             "adjacency": [{1: 0}, {0: 0}, {}],
             "absorbed": [[], [2], []],
             "num_ids": 3,

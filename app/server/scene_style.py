@@ -149,7 +149,7 @@ def edge_errors(cmap: CognitiveMap) -> FloatArray:
     norms = _whitened_norms(
         x[graph.edge_from], x[graph.edge_to], graph.measurements, graph.information
     )
-    return norms[~cmap.graph.edge_evidence[cmap.graph.live_edges()]]
+    return norms[cmap.graph.path_rows()]
 
 
 def edge_error(
