@@ -7,7 +7,9 @@ matches included, with ground truth. It is read from ``../shared/real/tuc`` besi
 
 Printed per configuration and map: vertices, edges, ATE, layout completeness/correctness at
 0.5 m, size change over the second half of the run (raw, and on known ground: vertices made on
-ground first explored in the second half set apart), vertices merged by scene integration; per
+ground first explored in the second half set apart), vertices merged by scene integration --
+and below the scene-integration map, the same map with the paper's merge
+(``integration_keeps_evidence`` 0: V, E, ATE, completeness, correctness); per
 configuration the links, their precision (position within 1 m, and within 0.5 m), the
 dead-reckoning ATE and the realtime factor (reading the file + making the events + the three
 maps). Configurations:
@@ -139,6 +141,20 @@ def report(result: Result) -> dict[MapMode, dict[str, float]]:
             f"{fid.completeness:6.3f} {fid.correctness:6.3f} {growth.change:+8.1%} "
             f"{growth.change_without_exploration:+7.1%} {cmap.counters.integrated:6d} "
             f"{cmap.counters.refused_relocalisations:7d}"
+        )
+    params = session.maps[MapMode.SCENE_INTEGRATION].params
+    if params.integration_keeps_evidence >= 0.5:  # the paper's merge, beside
+        paper = session.rebuild(
+            params.with_changes(integration_keeps_evidence=0.0),
+            modes=(MapMode.SCENE_INTEGRATION,),
+        )[MapMode.SCENE_INTEGRATION]
+        fid = session.layout_fidelity(paper, RADIUS)
+        ate = session.ate(paper)
+        assert fid is not None and ate is not None
+        label = "SI, paper's merge"
+        print(
+            f"  {label:18} {paper.num_vertices:5d} {paper.num_edges:5d} {ate:7.3f} "
+            f"{fid.completeness:6.3f} {fid.correctness:6.3f}"
         )
     return figures
 

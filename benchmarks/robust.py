@@ -13,7 +13,8 @@ Four parts (``--parts a,b,c,d``; all by default):
 (b) **Generated logs** (``cogmap make-log``: six driving patterns x three seeds, drift from a
     few metres to over 30 m of dead-reckoning ATE, 10-50 % false candidates with structured
     ones): each map's ATE against the same log with only its true links (labelled by ground
-    truth within 1 m) and against dead reckoning, for the paper's Huber and the defaults.
+    truth within 1 m) and against dead reckoning, for the paper's Huber and the defaults; and the
+    scene-integration map with the paper's merge (``integration_keeps_evidence`` 0) beside.
 (c) **Lecture Hall** (TUC, real): every map with the log defaults.
 (d) **The four built-in maze layouts** with 1 % and 5 % false relocalisations injected into the
     front end's events (link + set current to a random vertex at least 2 m away): each map's
@@ -182,6 +183,13 @@ def build_log_maps(reader: object, params: MapParams) -> tuple[object, float]:
     return session, time.perf_counter() - started
 
 
+def paper_merge(session: object, params: MapParams) -> object:
+    """A session's scene-integration map rebuilt with the paper's merge (no run's evidence)."""
+    mode = MapMode.SCENE_INTEGRATION
+    changed = params.with_changes(integration_keeps_evidence=0.0)
+    return session.rebuild(changed, modes=(mode,))[mode]  # type: ignore[attr-defined]
+
+
 def part_b(quick: bool, seeds: tuple[int, ...] = LOG_SEEDS) -> list[float]:
     """Generated logs: each map against the map of the true links alone and dead reckoning."""
     from cogmap_core.datasets.cache import cache_dir
@@ -205,6 +213,7 @@ def part_b(quick: bool, seeds: tuple[int, ...] = LOG_SEEDS) -> list[float]:
         print(
             f"    {'log':34} {'DR m':>6} {'links':>5} {'prec':>5} {'odo x':>5} {'x real':>6} | "
             + " | ".join(f"{m.value[:8]:>8} ATE  true  ratio     V compl  corr" for m in MapMode)
+            + " | SI paper's merge: ATE  true  ratio"
         )
         worst: list[float] = []
         for name, path in generated_logs(cache_dir() / "bench" / "logs", quick, seeds):
@@ -235,6 +244,11 @@ def part_b(quick: bool, seeds: tuple[int, ...] = LOG_SEEDS) -> list[float]:
                     f" {fid.completeness:5.2f} {fid.correctness:5.2f} |"
                 )
                 worst.append(ate / ref)
+            paper_ate, paper_ref = (
+                s.ate(paper_merge(s, params))  # type: ignore[attr-defined]
+                for s in (session, reference)
+            )
+            row += f" {paper_ate:20.2f} {paper_ref:5.2f} {paper_ate / paper_ref:6.2f}"
             print(row, flush=True)
         values = np.array(worst)
         print(
