@@ -12,9 +12,10 @@ end, the event log, the three maps with their optimisations -- and prints per la
 - the process's resident memory;
 
 then the totals, the size change of each map over laps 3-N (raw and with ground first explored in
-those laps set apart), the time to save the whole session and to load it again, and the targets.
-It writes ``long_term.png`` (and ``long_term.svg``): sizes per map over time (left) and per-lap
-cost per stage (right).
+those laps set apart) with its fidelity and ATE -- and the scene-integration map rebuilt with the
+paper's merge (``integration_keeps_evidence`` 0) beside, not timed --, the time to save the
+whole session and to load it again, and the targets. It writes ``long_term.png`` (and
+``long_term.svg``): sizes per map over time (left) and per-lap cost per stage (right).
 
 Targets (issue "Long-term mapping", 60 laps): compact vertices change laps 3-60 within +-3 % and
 completeness / correctness >= 0.98 at lap 60; front end ms per frame lap 60 <= 1.3 x lap 6's;
@@ -38,11 +39,11 @@ from pathlib import Path
 from typing import Any
 
 from app.report_figures import long_term_figure, save_figure
-from cogmap_core.cognitive_map import MapMode
+from cogmap_core.cognitive_map import CognitiveMap, MapMode
 from cogmap_core.datasets import open_bag
 from cogmap_core.datasets.generator import MazeConfig, plan_dataset
 from cogmap_core.datasets.profile import frontend_config_for
-from cogmap_core.evaluation import LAYOUT_RADIUS
+from cogmap_core.evaluation import LAYOUT_RADIUS, LayoutFidelity, SizeChange
 from cogmap_core.map_modes import ALL_MODES
 from cogmap_core.session_file import SessionMeta, load_session, save_session
 from cogmap_core.slam import SlamSession
@@ -280,19 +281,16 @@ def main() -> int:
     dead_reckoning = log.dead_reckoning_ate()
     if dead_reckoning is not None:
         print(f"dead-reckoning ATE {dead_reckoning:.3f} m (the baseline of the maps' ATE)")
-    changes = {}
-    fidelities = {}
-    for mode in MODES:
-        cmap = run.session.maps[mode]
+
+    def describe(label: str, cmap: CognitiveMap) -> tuple[SizeChange, LayoutFidelity]:
+        """Print one map's size change, fidelity and ATE; return the first two."""
         change = log.size_change(cmap, lap_times[first_lap], lap_times[laps], LAYOUT_RADIUS)
         accuracy = log.map_accuracy(cmap.snapshot(), LAYOUT_RADIUS)
         assert change is not None and accuracy is not None
         fidelity, ate = accuracy.fidelity, accuracy.ate
-        changes[mode] = change
-        fidelities[mode] = fidelity
         optimise_s = sum(o.wall_s for o in cmap.optimizations)
         print(
-            f"  {mode.value:18} V {cmap.num_vertices:5d} E {cmap.num_edges:5d}; end of lap "
+            f"  {label:18} V {cmap.num_vertices:5d} E {cmap.num_edges:5d}; end of lap "
             f"{first_lap} to {laps}: {change.start_vertices} -> {change.end_vertices} vertices, "
             f"{change.change:+.1%} ({change.change_without_exploration:+.1%} without the "
             f"{change.exploration_vertices} made on ground first explored then); completeness "
@@ -300,6 +298,17 @@ def main() -> int:
             + ("" if ate is None else f", ATE {ate:.4f} m")
             + f"; {len(cmap.optimizations)} optimisations, {optimise_s:.1f} s"
         )
+        return change, fidelity
+
+    changes = {}
+    fidelities = {}
+    for mode in MODES:
+        changes[mode], fidelities[mode] = describe(mode.value, run.session.maps[mode])
+    merged = MapMode.SCENE_INTEGRATION
+    params = run.session.maps[merged].params
+    if params.integration_keeps_evidence >= 0.5:  # the paper's merge, beside (not timed)
+        paper = params.with_changes(integration_keeps_evidence=0.0)
+        describe("SI, paper's merge", run.session.rebuild(paper, modes=(merged,))[merged])
     print(
         f"session: saved in {run.save_s:.2f} s, loaded in {run.load_s:.2f} s, "
         f"{run.session_bytes / 1e6:.1f} MB ({run.session.frontend.template_count} templates, "
