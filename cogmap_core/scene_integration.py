@@ -90,9 +90,13 @@ class RevisitRun:
         vertices: the vertices created, in order.
         created: data time of the first vertex.
         end: vertex id the robot re-localised on when the run closed (-1 while open).
-        closing: the closing link's measurement: the pose of ``end``'s place in the frame of the
-            run's last vertex.
+        closing: the closing link's measurement: the pose of ``end``'s place in the frame of
+            ``closed_at``.
         closed: data time of the closing relocalisation.
+        closed_at: the vertex id the robot was at when the closing link was measured (the frame
+            of ``closing``): the run's last vertex, or one the robot was re-localised on since
+            (a young vertex of the run while it spun back, or one that absorbed it); -1: the
+            run's last vertex.
 
     """
 
@@ -103,6 +107,11 @@ class RevisitRun:
     end: int = -1
     closing: tuple[float, float, float] = (0.0, 0.0, 0.0)
     closed: float = math.nan
+    closed_at: int = -1
+
+    def closer(self) -> int:
+        """The vertex id the closing link was measured from (``closed_at``, or the last vertex)."""
+        return self.closed_at if self.closed_at >= 0 else self.vertices[-1]
 
     def state_dict(self) -> dict[str, Any]:
         """The run as plain data (every attribute; ``vertices`` and ``closing`` as lists)."""
@@ -114,6 +123,7 @@ class RevisitRun:
             "end": self.end,
             "closing": list(self.closing),
             "closed": self.closed,
+            "closed_at": self.closed_at,
         }
 
     @classmethod
@@ -127,6 +137,7 @@ class RevisitRun:
             end=int(state["end"]),
             closing=tuple(float(v) for v in state["closing"]),  # type: ignore[arg-type]
             closed=float(state["closed"]),
+            closed_at=int(state["closed_at"]),
         )
 
 
@@ -284,6 +295,7 @@ class SceneIntegration:
             return 0
         self.open = None
         run.end, run.closing, run.closed = end, closing, time
+        run.closed_at = robot
         if not _links_agree(graph, run, params):
             self.pending.append(run)  # let the optimisation decide
             return 0
@@ -368,7 +380,7 @@ class SceneIntegration:
 
 def _bracketing_links(graph: MapGraph, run: RevisitRun) -> list[int]:
     """The loop closures a run's merge rests on: its closing link and, if any, its opening one."""
-    closing = graph.edge_between(graph.resolve(run.vertices[-1])[0], graph.resolve(run.end)[0])
+    closing = graph.edge_between(graph.resolve(run.closer())[0], graph.resolve(run.end)[0])
     return [k for k in (closing, _opening_link(graph, run)) if k >= 0]
 
 
@@ -386,7 +398,7 @@ def _opening_link(graph: MapGraph, run: RevisitRun) -> int:
 
 def _links_agree(graph: MapGraph, run: RevisitRun, params: MapParams) -> bool:
     """Whether the links that bracket the run agree with the map (condition 2, module doc)."""
-    closing = _link_residual(graph, run.vertices[-1], run.end, run.closing, params)
+    closing = _link_residual(graph, run.closer(), run.end, run.closing, params)
     if closing > params.integration_max_residual:
         return False
     k = _opening_link(graph, run)

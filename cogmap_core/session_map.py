@@ -175,8 +175,9 @@ def load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
 
 
 def _run(s: Json) -> Json:
-    """A revisit run's state as saved (``opened_from`` is absent from sessions saved before it)."""
-    return {"opened_from": -1, **s}
+    """A revisit run's state as saved (``opened_from`` and ``closed_at`` are absent from sessions
+    saved before them: -1, the run's last vertex, is what those sessions meant)."""
+    return {"opened_from": -1, "closed_at": -1, **s}
 
 
 __all__ = ["load_map", "save_map"]

@@ -122,6 +122,33 @@ def test_revisit_vertex_merges_into_the_old_place_case_a():
     assert cmap.num_edges == LAP  # the lap's 80 sequential edges, the closing edge 79 -> 0
 
 
+@pytest.mark.parametrize("mode", ["scene_integration", "compact"])
+def test_a_run_closed_after_spinning_back_is_judged_from_where_the_robot_was(mode):
+    # On known ground the robot turns on the spot, the front end proposes two vertices (0.4 and
+    # 0.8 rad turned), the robot turns back, is re-localised on the first of them (young: the
+    # run stays open) and then on the old vertex it started from. The closing link was measured
+    # from the first new vertex; judged from the run's last one it would disagree by 0.4 rad.
+    loop = SquareLoop()
+    loop.first_lap()
+    s = loop.s
+    for _ in range(33):
+        s.relocalise(loop.first[loop.step % LAP])
+        loop.advance()
+    old = loop.first[33]
+    s.relocalise(old)
+    s.move(0.0, 0.4)
+    a = s.create()
+    s.move(0.0, 0.4)
+    b = s.create()
+    s.move(0.0, -0.4)
+    s.relocalise(a)
+    s.move(0.0, -0.4)
+    s.relocalise(old)
+    cmap = build(mode, s, **PAPER_MERGE)
+    assert a not in alive(cmap) and b not in alive(cmap)
+    assert cmap.resolve(a)[0] == cmap.resolve(old)[0] == cmap.resolve(b)[0]
+
+
 def test_a_merged_revisit_vertex_leaves_its_chain_as_evidence():
     """Case A with the run's evidence kept: its two edges 32 -> v -> 34, composed, join 32 and
     34 -- optimised, held, not drawn."""

@@ -171,10 +171,10 @@ def test_a_clusterer_s_state_is_its_clusters_and_whether_the_newest_is_open() ->
 
 def test_records_runs_and_the_gate_round_trip() -> None:
     run = RevisitRun(start=4, opened_from=2, vertices=[7, 8], created=1.5, end=3,
-                     closing=(0.1, -0.2, 0.3), closed=2.5)  # fmt: skip
+                     closing=(0.1, -0.2, 0.3), closed=2.5, closed_at=7)  # fmt: skip
     assert run.state_dict() == {
         "start": 4, "opened_from": 2, "vertices": [7, 8], "created": 1.5, "end": 3,
-        "closing": [0.1, -0.2, 0.3], "closed": 2.5,
+        "closing": [0.1, -0.2, 0.3], "closed": 2.5, "closed_at": 7,
     }  # fmt: skip
     assert RevisitRun.from_state(run.state_dict()) == run
     assert math.isnan(RevisitRun.from_state(RevisitRun(start=1).state_dict()).closed)
