@@ -119,6 +119,7 @@ def session_summary(
         entry["proposed"] = c.proposed
         entry["declined"] = c.declined
         entry["integrated"] = c.integrated
+        entry["split_again"] = c.split  # merged, then put back when their link was rejected
         entry["short_edges_removed"] = c.short_edges
         entry["duplicate_links"] = c.duplicate_links
         entry["refused_relocalisations"] = c.refused_relocalisations

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 import time as wallclock
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -53,7 +53,12 @@ from cogmap_core.geometry import TWO_PI, compose, compose_scalar, inverse_scalar
 from cogmap_core.map_graph import EdgeKind, MapGraph, MapSnapshot
 from cogmap_core.map_modes import ALL_MODES, MapMode
 from cogmap_core.neighborhood_fields import is_novel, neighborhood_field
-from cogmap_core.optimizer import OptimizerOptions, optimize_pose_graph, rejected_loop_closures
+from cogmap_core.optimizer import (
+    OptimizationResult,
+    OptimizerOptions,
+    optimize_pose_graph,
+    rejected_loop_closures,
+)
 from cogmap_core.posegraph import PoseGraph
 from cogmap_core.relocalisation import (
     RelocalisationCheck,
@@ -114,6 +119,8 @@ class MapCounters:
         declined: proposals declined by neighborhood fields (compact).
         integrated: vertices removed by scene integration.
         short_edges: vertices removed by short-edge removal.
+        split: vertices made live again because a link their merge rested on was rejected
+            (:mod:`~cogmap_core.merge_records`; no longer counted in ``integrated``).
         links: links (loop closures) the front end emitted.
         duplicate_links: links that added no edge (the pair was already joined, or the link
             closed on the vertex the robot is at).
@@ -125,6 +132,7 @@ class MapCounters:
     declined: int = 0
     integrated: int = 0
     short_edges: int = 0
+    split: int = 0
     links: int = 0
     duplicate_links: int = 0
     refused_relocalisations: int = 0
@@ -603,22 +611,25 @@ class CognitiveMap:
         if pose_graph.num_edges == 0:
             return None
         started = wallclock.perf_counter()
-        result = optimize_pose_graph(
-            pose_graph,
-            OptimizerOptions(
-                huber_scale=self.params.huber_scale,
-                initialization="none",
-                function_tolerance=1e-5,
-                loop_model=self.params.loop_closure_model(),
-            ),
-            new_loops=new_edges,
-            clusters=graph.edge_cluster[live],  # one cluster cannot overrule several
-            merged_on=graph.edge_held[live],  # ... nor a merge
-        )
+        result = self._solve(pose_graph, live, new_edges)
         wall = wallclock.perf_counter() - started
-        graph.pose[pose_graph.vertex_ids] = result.poses
         integrated = short = 0
         if self._integrates:
+            # a merge that rests on a link the solution rejects is split (merge_records), and
+            # the map solved again with its vertices and edges back
+            rejected = set(live[result.rejected & graph.edge_held[live]].tolist())
+            revived = self.integration.split_merges_on(graph, rejected)
+            if revived:
+                self.counters.integrated -= revived
+                self.counters.split += revived
+                started = wallclock.perf_counter()
+                more = self._solve(self.to_pose_graph(), graph.live_edges(), None)
+                wall += wallclock.perf_counter() - started
+                result = replace(
+                    more,
+                    initial_cost=result.initial_cost,
+                    iterations=result.iterations + more.iterations,
+                )
             integrated = self.integration.after_optimisation(graph, self.params)
             self.counters.integrated += integrated
         if self._removes_short:
@@ -641,6 +652,30 @@ class CognitiveMap:
         )
         self.optimizations.append(record)
         return record
+
+    def _solve(
+        self, pose_graph: PoseGraph, live: IntArray, new_edges: NDArray[np.bool_] | None
+    ) -> OptimizationResult:
+        """One batch optimisation of ``pose_graph`` (the live edges ``live``), its poses kept.
+
+        ``new_edges``: the edges added since the last optimisation (the robust loop model weighs
+        the hypothesis that its new links are true); None: none.
+        """
+        graph = self.graph
+        result = optimize_pose_graph(
+            pose_graph,
+            OptimizerOptions(
+                huber_scale=self.params.huber_scale,
+                initialization="none",
+                function_tolerance=1e-5,
+                loop_model=self.params.loop_closure_model(),
+            ),
+            new_loops=new_edges,
+            clusters=graph.edge_cluster[live],  # one cluster cannot overrule several
+            merged_on=graph.edge_held[live],  # ... nor a merge
+        )
+        graph.pose[pose_graph.vertex_ids] = result.poses
+        return result
 
 
 class MapSet:

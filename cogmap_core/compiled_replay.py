@@ -219,7 +219,7 @@ class CompiledReplay:
         self.cmap = cmap
         self._table = np.full((0, 2), loop._EMPTY, dtype=np.int64)
         self._table_used = 0
-        self._seen: tuple[int, int, int] | None = None  # graph counts when the table was made
+        self._seen: tuple[tuple[int, int], int, int] | None = None  # graph counts, table made
         self._edge_log = np.empty((0, 3), dtype=np.int64)
         self._absorbed_log = np.empty((0, 2), dtype=np.int64)
         self._run_log = np.empty(0, dtype=np.int64)
@@ -291,7 +291,8 @@ class CompiledReplay:
         """Bring the edge table up to date with the graph (rebuilt after merges)."""
         cmap = self.cmap
         g = cmap.graph
-        merged = g.num_ids - g.num_vertices - cmap.counters.declined  # vertices merged away
+        # vertices merged away, edges removed, and the revision (a merge split also changes it)
+        merged = (g.num_ids - g.num_vertices - cmap.counters.declined, g.revision)
         removed = g.num_edges_total - g.num_edges
         seen = self._seen
         need = 2 * (g.num_edges + 64)

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from cogmap_core.edge_noise import OdometryNoise, edge_information, information_unit
 from cogmap_core.errors import EventError, StateError
 from cogmap_core.geometry import (
+    between_scalar,
     compose,
     compose_covariance,
     compose_scalar,
@@ -392,6 +393,65 @@ class MapGraph:
         self._absorbed[kept].extend(moved)
         self.alive[removed] = False
         self.num_vertices -= 1
+
+    def standing_for(self, vertex_id: int) -> list[int]:
+        """The ids whose alias live vertex ``vertex_id`` is, besides itself (a copy)."""
+        return list(self._absorbed[vertex_id])
+
+    def revive_vertex(self, vertex_id: int, moved: Sequence[int]) -> None:
+        """Make a merged vertex live again where the map now places it (a merge split again).
+
+        Its pose is the one its alias gives it now. ``moved``: the ids that stood for it,
+        besides itself, when it was merged (:meth:`standing_for`); they stand for it again, at
+        the poses the map gives them now. Its edges are put back by :meth:`restore_edge`.
+        """
+        if self.alive[vertex_id]:
+            raise StateError(f"vertex {vertex_id} is live: there is no merge to split")
+        pose = self.pose_of(vertex_id)
+        offsets = [between_scalar(pose, self.pose_of(i)) for i in moved]
+        self.revision += 1
+        for i in (vertex_id, *moved):
+            self._absorbed[int(self.alias[i])].remove(i)
+        self.pose[vertex_id] = pose
+        self.alias[vertex_id] = vertex_id
+        self.alias_offset[vertex_id] = 0.0
+        for i, offset in zip(moved, offsets, strict=True):
+            self.alias[i] = vertex_id
+            self.alias_offset[i] = offset
+        self._absorbed[vertex_id] = list(moved)
+        self.alive[vertex_id] = True
+        self.num_vertices += 1
+
+    def restore_edge(
+        self, k: int, src: int, dst: int, rel: Pose | list[float], cov: FloatArray
+    ) -> bool:
+        """Put edge ``k`` back as it was measured, ``src -> dst`` with ``rel`` and ``cov``.
+
+        The ids stand for the live vertices they resolve to now, the measurement re-expressed as
+        :meth:`merge_vertex` re-expresses it. Where that would join a vertex to itself or
+        duplicate a connection, the edge stays removed (False). A live edge ``k`` is taken off
+        its ends first.
+        """
+        self.remove_edge(k)
+        self.revision += 1
+        a, to_src = self.resolve(src)
+        b, to_dst = self.resolve(dst)
+        if a == b or b in self.adjacency[a]:
+            return False
+        from_dst = inverse_scalar(to_dst)
+        self.edge_from[k], self.edge_to[k] = a, b
+        self.edge_rel[k] = compose_scalar(compose_scalar(to_src, list(rel)), from_dst)
+        own = np.asarray(cov, dtype=np.float64)
+        if own[0, 0] > 0 and any(to_dst):  # evidence, in its own frame (merge_vertex)
+            own = compose_covariance(own, from_dst, np.zeros((3, 3)))
+        self.edge_cov[k] = own
+        self.edge_alive[k] = True
+        self.adjacency[a][b] = k
+        self.adjacency[b][a] = k
+        self.num_edges += 1
+        if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
+            self.num_loop_edges += 1
+        return True
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict[str, Any]:

@@ -20,7 +20,9 @@ edges just removed) -- when
    older than its first vertex; neither belongs to the run);
 2. the links that bracket the run agree with the map: their residuals, weighed as the
    optimiser weighs them, are at most ``integration_max_residual`` (an edge the optimisation
-   could not satisfy is no evidence). That is the closing link; and, when a link alone
+   could not satisfy is no evidence). That is the closing link, judged in the frame it was
+   measured in: the vertex the robot was at, the run's last one unless the robot spun back
+   onto a young vertex of the run before it closed; and, when a link alone
    re-localised the robot where the run began (below), that link must be one the loop-closure
    model keeps (:func:`~cogmap_core.optimizer.rejected_loop_closures`' rule: its residual
    within the model's scale) -- a false match that opened a run says nothing about where its
@@ -33,6 +35,9 @@ Each vertex of a redundant run is merged into the nearer end of that edge, its e
 with the current (optimised) relative pose. The links that bracket a merged run are then *held*
 (``MapGraph.hold_edge``): the merge rests on them, so no later optimisation's hypothesis may
 reject them while it stands (:func:`~cogmap_core.cluster_consistency.overrules_a_merge`).
+Should the solution an optimisation keeps reject one all the same, the merge is split again
+(:mod:`~cogmap_core.merge_records`; beyond the paper): its vertices and edges come back as they
+were measured, and the map is solved again (:class:`~cogmap_core.cognitive_map.CognitiveMap`).
 
 **Keeping what the run measured** (``MapParams.integration_keeps_evidence``, the
 scene-integration map; beyond the paper). The run's chain from ``start`` to ``end`` is
@@ -76,6 +81,7 @@ from cogmap_core.edge_noise import link_heading_weight
 from cogmap_core.geometry import between, compose_scalar, wrap_scalar
 from cogmap_core.map_graph import MapGraph
 from cogmap_core.marginalisation import ChainMeasurement, chain_measurement, keep_chain_evidence
+from cogmap_core.merge_records import MergeRecord, split_merge
 
 
 @dataclass(slots=True)
@@ -233,6 +239,8 @@ class SceneIntegration:
         self.keeps_evidence = keeps_evidence
         self.open: RevisitRun | None = None
         self.pending: list[RevisitRun] = []
+        #: the merges made, oldest first, each as it can be split again
+        self.merges: list[MergeRecord] = []
         self._known: KnownEdges | None = None
         # (robot's vertex, vertex id it was re-localised on) of the latest relocalisation on
         # known ground, until the next vertex is added
@@ -241,22 +249,28 @@ class SceneIntegration:
     def state_dict(self) -> dict[str, Any]:
         """The runs and the index as plain data, what :meth:`load_state` restores.
 
-        ``open`` and ``pending`` runs (:meth:`RevisitRun.state_dict`), ``relocalised_at`` (the
-        latest relocalisation on known ground, ``[robot's vertex, vertex]``) and ``known_edges``
-        (:meth:`KnownEdges.state_dict`); None where there is none.
+        ``open`` and ``pending`` runs (:meth:`RevisitRun.state_dict`), ``merges``
+        (:meth:`MergeRecord.state_dict`), ``relocalised_at`` (the latest relocalisation on known
+        ground, ``[robot's vertex, vertex]``) and ``known_edges`` (:meth:`KnownEdges.state_dict`);
+        None where there is none.
         """
         at, known = self._relocalised_at, self._known
         return {
             "open": None if self.open is None else self.open.state_dict(),
             "pending": [run.state_dict() for run in self.pending],
+            "merges": [record.state_dict() for record in self.merges],
             "relocalised_at": None if at is None else list(at),
             "known_edges": None if known is None else known.state_dict(),
         }
 
     def load_state(self, state: dict[str, Any]) -> None:
-        """Hold the runs and the index :meth:`state_dict` described."""
+        """Hold the runs and the index :meth:`state_dict` described.
+
+        A state without ``merges`` (written before merges could be split) has none to split.
+        """
         self.open = None if state["open"] is None else RevisitRun.from_state(state["open"])
         self.pending = [RevisitRun.from_state(run) for run in state["pending"]]
+        self.merges = [MergeRecord.from_state(record) for record in state.get("merges", [])]
         at = state["relocalised_at"]
         self._relocalised_at = None if at is None else (int(at[0]), int(at[1]))
         known = state["known_edges"]
@@ -340,8 +354,10 @@ class SceneIntegration:
             u, w = (graph.resolve(x)[0] for x in edge)
             gaps = np.hypot(*(graph.pose[[u, w], :2] - graph.pose[v, :2]).T)
             absorbers.append(u if gaps[0] <= gaps[1] else w)
-        links = _bracketing_links(graph, run)
+        links = bracketing = _bracketing_links(graph, run)
         chain = self._run_chain(graph, run, members, params)
+        record = MergeRecord.before_merging(graph, members)
+        evidence = -1
         merged = 0
         for v, kept in zip(members, absorbers, strict=True):
             kept = graph.resolve(kept)[0]
@@ -355,7 +371,26 @@ class SceneIntegration:
         if merged:
             for k in links:
                 graph.hold_edge(k)
+            rests_on = [k for k in (*bracketing, evidence) if k >= 0]
+            self.merges.append(record.merged(graph, rests_on, evidence))
         return merged
+
+    def split_merges_on(self, graph: MapGraph, rejected: set[int]) -> int:
+        """Split every merge that rests on a link of ``rejected``, newest first.
+
+        Return the vertices made live again (:mod:`~cogmap_core.merge_records`). The links
+        those merges rested on stay held only where a merge that stands rests on them too.
+        """
+        split = [record for record in self.merges if rejected.intersection(record.links)]
+        if not split:
+            return 0
+        self._known = None  # the graph's edges changed
+        revived = sum(split_merge(graph, record) for record in reversed(split))
+        self.merges = [record for record in self.merges if not rejected.intersection(record.links)]
+        still = {k for record in self.merges for k in record.links}
+        for k in {k for record in split for k in record.links} - still:
+            graph.edge_held[k] = False
+        return revived
 
     def _run_chain(
         self, graph: MapGraph, run: RevisitRun, members: list[int], params: MapParams
@@ -363,18 +398,23 @@ class SceneIntegration:
         """What a closed run measured, when this map keeps it.
 
         Its chain of edges from the vertex its first vertex hangs off (``start``, or where a link
-        alone re-localised the robot, the vertex that link came from: the link itself stays) to
-        ``end``.
+        alone re-localised the robot, the vertex that link came from: the link itself stays)
+        through its vertices up to the one the closing link was measured from, to ``end``. (The
+        robot may have spun back onto a vertex of the run before it closed: the vertices after
+        that one hang off the chain and say nothing about where its ends lie.)
 
-        None when the map does not keep it, when a vertex of the run is gone already or when the
-        chain lacks an edge (the closing link duplicated one).
+        None when the map does not keep it, when a vertex of the run is gone already, when the
+        closing link was measured from a vertex outside the run, or when the chain lacks an edge
+        (the closing link duplicated one).
         """
         if not self.keeps_evidence or params.integration_keeps_evidence < 0.5:
             return None
-        if len(members) != len(run.vertices):
+        closer = run.closer()
+        if len(members) != len(run.vertices) or closer not in members:
             return None
         first = run.opened_from if run.opened_from >= 0 else run.start
-        chain = [graph.resolve(first)[0], *members, graph.resolve(run.end)[0]]
+        walked = members[: members.index(closer) + 1]
+        chain = [graph.resolve(first)[0], *walked, graph.resolve(run.end)[0]]
         return chain_measurement(graph, chain, params.link_sigmas(), params.odometry_noise())
 
 

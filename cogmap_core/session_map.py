@@ -32,6 +32,8 @@ from cogmap_core.session_arrays import (
 _GRAPH_COUNTS = ("num_ids", "num_edges_total", "num_vertices", "num_edges", "num_loop_edges")
 _CLUSTER_FIELDS = ("start_time", "last_time", "edge_count", "closed_time")
 _KNOWN_EDGES_ARRAYS = ("start", "end", "ends", "newest")
+#: a merge record's per-edge arrays and each row's shape
+_MERGE_EDGE_ARRAYS = {"edges": (), "ends": (2,), "rel": (3,), "cov": (3, 3)}
 
 
 def save_map(cmap: CognitiveMap, prefix: str, arrays: Arrays) -> Json:
@@ -65,6 +67,7 @@ def save_map(cmap: CognitiveMap, prefix: str, arrays: Arrays) -> Json:
     if known is not None:
         for name in _KNOWN_EDGES_ARRAYS:
             arrays[prefix + "known_edges." + name] = known[name]
+    _save_merges(arrays, prefix + "merges.", integration["merges"])
     save_records(arrays, prefix + "optimizations.", state["optimizations"], OptimizationRecord)
     save_records(arrays, prefix + "refused.", state["refused"], RelocalisationCheck)
     gate = state["gate"]
@@ -148,6 +151,7 @@ def load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
         "integration": {
             "open": None if si["open"] is None else _run(si["open"]),
             "pending": [_run(r) for r in si["pending"]],
+            "merges": _load_merges(arrays, prefix + "merges."),
             # (absent from files of before it existed: no pending one)
             "relocalised_at": si.get("relocalised_at"),
             "known_edges": known,
@@ -174,9 +178,60 @@ def load_map(s: Json, prefix: str, arrays: Arrays) -> CognitiveMap:
         raise SessionError(f"{prefix}{exc}") from None
 
 
+def _save_merges(arrays: Arrays, prefix: str, merges: list[Json]) -> None:
+    """Scene integration's merge records (:class:`~cogmap_core.merge_records.MergeRecord`)."""
+    save_lists(arrays, prefix + "links", [m["links"] for m in merges])
+    save_lists(arrays, prefix + "removed", [m["removed"] for m in merges])
+    save_lists(arrays, prefix + "moved", [moved for m in merges for moved in m["moved"]])
+    arrays[prefix + "evidence"] = np.array([m["evidence"] for m in merges], dtype=np.int64)
+    arrays[prefix + "edge_count"] = np.array([len(m["edges"]) for m in merges], dtype=np.int64)
+    for name, shape in _MERGE_EDGE_ARRAYS.items():
+        parts = [np.asarray(m[name]).reshape(-1, *shape) for m in merges]
+        dtype = np.int64 if name in ("edges", "ends") else np.float64
+        arrays[prefix + name] = np.concatenate(parts) if parts else np.zeros((0, *shape), dtype)
+
+
+def _load_merges(arrays: Arrays, prefix: str) -> list[Json]:
+    """The merge records :func:`_save_merges` saved (none in files of before they existed)."""
+    if prefix + "edge_count" not in arrays:
+        return []
+    links = load_lists(arrays, prefix + "links")
+    removed = load_lists(arrays, prefix + "removed")
+    moved = load_lists(arrays, prefix + "moved")
+    evidence = arrays[prefix + "evidence"].tolist()
+    counts = arrays[prefix + "edge_count"].tolist()
+    edge_arrays = {name: arrays[prefix + name] for name in _MERGE_EDGE_ARRAYS}
+    sizes = {len(links), len(removed), len(evidence), len(counts)}
+    if (
+        len(sizes) != 1
+        or sum(len(r) for r in removed) != len(moved)
+        or any(len(a) != sum(counts) for a in edge_arrays.values())
+    ):
+        raise SessionError(f"{prefix[:-1]} records do not fit together")
+    merges = []
+    first_edge = first_moved = 0
+    for k, count in enumerate(counts):
+        n = len(removed[k])
+        merges.append(
+            {
+                "links": links[k],
+                "evidence": evidence[k],
+                "removed": removed[k],
+                "moved": moved[first_moved : first_moved + n],
+                **{name: a[first_edge : first_edge + count] for name, a in edge_arrays.items()},
+            }
+        )
+        first_edge += count
+        first_moved += n
+    return merges
+
+
 def _run(s: Json) -> Json:
-    """A revisit run's state as saved (``opened_from`` and ``closed_at`` are absent from sessions
-    saved before them: -1, the run's last vertex, is what those sessions meant)."""
+    """A revisit run's state as saved.
+
+    ``opened_from`` and ``closed_at`` are absent from sessions saved before them: -1 (for
+    ``closed_at``, the run's last vertex) is what those sessions meant.
+    """
     return {"opened_from": -1, "closed_at": -1, **s}
 
 

@@ -30,6 +30,7 @@ from cogmap_core.events import CreateVertex, LinkToVertex, Odometry, SetCurrentV
 from cogmap_core.map_build import BuildTask, build_map
 from cogmap_core.schedule import schedule_divergence
 from tests.conftest import DATA
+from tests.test_scene_integration import NO_GATE, lap_closed_by_a_false_link
 
 pytestmark = pytest.mark.skipif(
     not compiled_replay.available(), reason=f"{compiled_replay.unavailable_reason()}"
@@ -173,6 +174,23 @@ def test_broken_streams_raise_the_python_error(events) -> None:
     with pytest.raises(EventError) as raised:
         compiled_replay.replay(compiled, events_to_columns(events), 0, len(events))
     assert str(raised.value) == str(python.value)
+
+
+def test_a_merge_split_again_replays_as_the_python_code_splits_it() -> None:
+    """A merge split when its closing link is rejected (``test_scene_integration``'s false
+    closing link), then a third lap: the compiled loop's edge table follows the split."""
+    loop, _ = lap_closed_by_a_false_link()
+    loop.known_lap()
+    events = loop.s.events
+    params = MapParams(integration_max_residual=1.0, **NO_GATE)
+    expected = CognitiveMap(MapMode.SCENE_INTEGRATION, params)
+    expected.apply_all(events)
+    expected.finish()
+    actual = CognitiveMap(MapMode.SCENE_INTEGRATION, params)
+    compiled_replay.replay(actual, events_to_columns(events), 0, len(events))
+    actual.finish()
+    assert expected.counters.split == 1
+    assert_same_state(actual, expected)
 
 
 def test_without_numba_the_python_code_replays(logs, monkeypatch) -> None:

@@ -49,6 +49,7 @@ MAP_KEYS = {
     "proposed",
     "declined",
     "integrated",
+    "split_again",
     "short_edges_removed",
     "duplicate_links",
     "refused_relocalisations",

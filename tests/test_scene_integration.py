@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from cogmap_core.cognitive_map import CognitiveMap
+from cogmap_core.cognitive_map import CognitiveMap, MapSnapshot
 from cogmap_core.config import MapParams
 from cogmap_core.geometry import between
 from cogmap_core.map_graph import EdgeKind
@@ -163,6 +163,34 @@ def test_a_merged_revisit_vertex_leaves_its_chain_as_evidence():
     assert graph.edge_evidence[k] and graph.edge_held[k] and graph.edge_from[k] == loop.first[32]
     truth = between(loop.s.truth[loop.first[32]], loop.s.truth[loop.first[34]])
     np.testing.assert_allclose(graph.edge_rel[k], truth, atol=1e-9)  # exact odometry
+
+
+def test_a_run_that_spun_back_leaves_the_chain_it_walked_as_evidence():
+    """Lap 2 proposes a vertex v at position 33, turns on the spot there (the front end proposes
+    w, 0.4 rad turned), turns back, is re-localised on v (young: the run stays open) and drives
+    on to 34, where it is recognised. The closing link was measured from v, so the chain the run
+    walked is 32 -> v -> 34 (w hangs off it): its evidence joins 32 and 34, as in case A."""
+    loop = SquareLoop()
+    loop.first_lap()
+    s = loop.s
+    while loop.step < LAP + 33:
+        s.relocalise(loop.first[loop.step % LAP])
+        loop.advance()
+    v = s.create()
+    s.move(0.0, 0.4)
+    w = s.create()
+    s.move(0.0, -0.4)
+    s.relocalise(v)
+    loop.advance()
+    loop.known_lap()
+    cmap = build("scene_integration", s)
+    assert alive(cmap) == loop.first and cmap.integrated_vertices == 2
+    graph = cmap.graph
+    k = graph.edge_between(loop.first[32], loop.first[34])
+    assert graph.edge_evidence[k] and graph.edge_held[k] and graph.edge_from[k] == loop.first[32]
+    truth = between(s.truth[loop.first[32]], s.truth[loop.first[34]])
+    np.testing.assert_allclose(graph.edge_rel[k], truth, atol=1e-9)  # exact odometry
+    assert cmap.resolve(w)[0] == loop.first[33]
 
 
 def test_several_revisit_vertices_onto_one_old_vertex_case_b():
@@ -387,21 +415,67 @@ def test_integration_radius_decides_how_far_a_revisit_may_lie():
 
 
 def test_integration_max_residual_keeps_revisits_whose_closing_link_disagrees():
-    loop = SquareLoop()
-    loop.first_lap()
-    loop.known_lap(propose={30})
-    v = loop.new[0]
     # the closing link claims the robot is at position 35 (0.2 m ahead): it contradicts
     # odometry, and the optimisation cannot satisfy it (0.15 m ahead left 0.101 m after the
     # paper's Huber and 0.0995 m after the robust loop model: on the 0.1 m limit either way)
+    loop, _ = lap_closed_by_a_false_link()
+    v = loop.new[0]
+    kept = build("scene_integration", loop.s, **NO_GATE)
+    assert v in alive(kept)
+    # (the paper's Huber: the robust loop model would reject the link and split the merge, below)
+    merged = build(
+        "scene_integration", loop.s, integration_max_residual=1.0, loop_model=0, **NO_GATE
+    )
+    assert v not in alive(merged)
+
+
+def lap_closed_by_a_false_link() -> tuple[SquareLoop, int]:
+    """Lap 2 proposes one vertex at position 30; the link after it names position 35 instead of
+    31 (0.2 m ahead, a false match). Returns the loop and the index of that link's event."""
+    loop = SquareLoop()
+    loop.first_lap()
+    loop.known_lap(propose={30})
     events = loop.s.events
     k = next(i for i, e in enumerate(events) if getattr(e, "target", None) == loop.first[31])
     events[k] = type(events[k])(events[k].time, loop.first[35], events[k].relative_rad)
     events[k + 1] = type(events[k + 1])(events[k + 1].time, loop.first[35], 0.0)
-    kept = build("scene_integration", loop.s, **NO_GATE)
-    assert v in alive(kept)
-    merged = build("scene_integration", loop.s, integration_max_residual=1.0, **NO_GATE)
-    assert v not in alive(merged)
+    return loop, k
+
+
+def edge_measurements(snapshot: MapSnapshot) -> dict[tuple[int, int], list[float]]:
+    """A snapshot's edges: (from, to) -> measurement."""
+    ends = zip(snapshot.edge_from.tolist(), snapshot.edge_to.tolist(), strict=True)
+    return dict(zip(ends, snapshot.edge_rel.tolist(), strict=True))
+
+
+@pytest.mark.parametrize("evidence", [0.0, 1.0])
+def test_a_false_link_merged_and_later_rejected_is_undone(evidence):
+    """With ``integration_max_residual`` 1 m the false link agrees with the map when it closes
+    the run, and the run's vertex is merged at once, resting on it; the optimisation then rejects
+    the link, so the merge is split: the vertex is live again with its edges as measured, and
+    the map is the standard map (same vertices, same edges and measurements, same poses)."""
+    loop, k = lap_closed_by_a_false_link()
+    v = loop.new[0]
+    params = MapParams(integration_max_residual=1.0, integration_keeps_evidence=evidence, **NO_GATE)
+    cmap = CognitiveMap("scene_integration", params)
+    cmap.apply_all(loop.s.events[: k + 2])
+    graph = cmap.graph
+    assert not graph.alive[v] and not cmap.optimizations
+    assert int(np.count_nonzero(graph.edge_held & graph.edge_alive)) == 1
+    assert len(cmap.integration.merges) == 1
+    cmap.apply_all(loop.s.events[k + 2 :])
+    cmap.finish()
+    standard = build("standard", loop.s, **params.to_dict())
+    assert len(cmap.optimizations) == 1
+    assert graph.alive[v] and (cmap.counters.split, cmap.counters.integrated) == (1, 0)
+    assert not cmap.integration.merges and not (graph.edge_held & graph.edge_alive).any()
+    got, want = cmap.snapshot(), standard.snapshot()
+    assert got.vertex_ids.tolist() == want.vertex_ids.tolist()
+    assert edge_measurements(got) == edge_measurements(want)
+    assert np.abs(got.poses - want.poses).max() < 1e-4
+    false_link = graph.edge_between(v, loop.first[35])
+    assert cmap.rejected_loop_edges().tolist() == standard.rejected_loop_edges().tolist()
+    assert cmap.rejected_loop_edges()[list(cmap.graph.live_edges()).index(false_link)]
 
 
 def test_integration_min_age_separates_revisits_from_recent_ground():

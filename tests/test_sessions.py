@@ -357,6 +357,27 @@ def test_a_file_from_before_kept_evidence_loads_with_none_kept(
     assert same_state(new, old)
 
 
+def test_a_file_from_before_merge_records_loads_with_no_merge_to_split(
+    resumed: Path, tmp_path: Path
+) -> None:
+    """``map.<mode>.merges.*`` are absent from older files: the maps load with no merge record
+    (their merges stand, held as before, and can no longer be split)."""
+    session = resumed / "day1.session.npz"
+    with np.load(session) as data:
+        suffixes = tuple({n[n.index(".merges.") :] for n in data.files if ".merges." in n})
+    assert ".merges.edge_count" in suffixes
+    older = older_file(session, tmp_path / "older.npz", suffixes)
+    new, _ = load_session(session)
+    old, _ = load_session(older)
+    records = {m: new.maps[m].integration.merges for m in new.maps.maps}
+    assert records[MapMode.SCENE_INTEGRATION] and records[MapMode.COMPACT]
+    assert not records[MapMode.STANDARD]
+    for mode, cmap in old.maps.maps.items():
+        assert cmap.integration.merges == []
+        cmap.integration.merges = records[mode]
+    assert same_state(new, old)
+
+
 @pytest.mark.parametrize("counter", ["proposed", "integrated", "refused_relocalisations"])
 def test_counters_that_do_not_add_up_are_refused(
     counter: str, resumed: Path, tmp_path: Path
@@ -530,7 +551,7 @@ KNOWN_ATTRIBUTES: dict[type, set[str]] = {
         "path_search",
     },  # fmt: skip
     # (keeps_evidence: the map's mode decides it when the map is made, not saved)
-    SceneIntegration: {"open", "pending", "_known", "_relocalised_at", "keeps_evidence"},
+    SceneIntegration: {"open", "pending", "_known", "_relocalised_at", "keeps_evidence", "merges"},
     EventLog: {
         "_n_events",
         "_n_frames",

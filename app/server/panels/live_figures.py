@@ -284,6 +284,7 @@ def figure_texts(cmap: CognitiveMap, figures: MapFigures | None) -> dict[str, st
         "proposed": str(c.proposed),
         "declined": str(c.declined),
         "integrated": str(c.integrated),
+        "split": str(c.split),
         "short_edges": str(c.short_edges),
         "refused": str(c.refused_relocalisations),
     }
@@ -334,6 +335,7 @@ _SECTIONS: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
             ("proposed", "vertices proposed"),
             ("declined", "declined by neighborhood fields"),
             ("integrated", "merged by scene integration"),
+            ("split", "put back: a link their merge rested on was rejected"),
             ("short_edges", "removed as short edges"),
             ("refused", "relocalisations refused"),
         ),
