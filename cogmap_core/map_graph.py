@@ -288,15 +288,40 @@ class MapGraph:
         self.edge_time[k] = t
         self.edge_kind[k] = kind
         self.edge_cluster[k] = cluster
-        self.edge_alive[k] = True
         self.edge_cov[k] = 0.0
-        self.adjacency[src][dst] = k
-        self.adjacency[dst][src] = k
         self.num_edges_total += 1
-        self.num_edges += 1
-        if kind == EdgeKind.LOOP_CLOSURE:
-            self.num_loop_edges += 1
+        self._attach(k)
         return k
+
+    def _attach(self, k: int) -> None:
+        """Make edge ``k`` a live edge between its two vertices (adjacency and counts)."""
+        a, b = int(self.edge_from[k]), int(self.edge_to[k])
+        self.edge_alive[k] = True
+        self.adjacency[a][b] = k
+        self.adjacency[b][a] = k
+        self.num_edges += 1
+        if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
+            self.num_loop_edges += 1
+
+    def _reexpress(
+        self, k: int, to_src: Pose | list[float] | None, to_dst: Pose | list[float] | None
+    ) -> None:
+        """Edge ``k``'s measurement (and own covariance) for ends moved into other frames.
+
+        ``to_src``, ``to_dst``: the pose of its old first / second vertex in the frame of the
+        vertex that now stands for it; None where that end stays. The covariance is in the
+        measurement's own frame, so only a change at the second end changes it.
+        """
+        rel = self.edge_rel[k].tolist()
+        if to_src is not None:
+            rel = compose_scalar(to_src, rel)
+        if to_dst is not None:
+            from_dst = inverse_scalar(to_dst)
+            if self.edge_cov[k, 0, 0] > 0:  # evidence; the offset is exact: only its frame
+                cov = compose_covariance(self.edge_cov[k], from_dst, np.zeros((3, 3)))
+                self.edge_cov[k] = cov
+            rel = compose_scalar(rel, from_dst)
+        self.edge_rel[k] = rel
 
     def remove_edge(self, k: int) -> None:
         """Remove edge ``k`` (no-op if already removed)."""
@@ -364,7 +389,6 @@ class MapGraph:
         ``kept`` to the same vertex is dropped as redundant (the existing edge stays). Every id
         that stood for ``removed`` stands for ``kept`` afterwards.
         """
-        inv_offset = inverse_scalar(offset)
         self.revision += 1
         kept_adjacency = self.adjacency[kept]
         for other, k in list(self.adjacency[removed].items()):
@@ -375,14 +399,10 @@ class MapGraph:
                 continue
             if self.edge_from[k] == removed:
                 self.edge_from[k] = kept
-                self.edge_rel[k] = compose_scalar(offset, self.edge_rel[k].tolist())
+                self._reexpress(k, offset, None)
             else:
                 self.edge_to[k] = kept
-                if self.edge_cov[k, 0, 0] > 0:  # evidence; the offset is exact: only its frame
-                    self.edge_cov[k] = compose_covariance(
-                        self.edge_cov[k], inv_offset, np.zeros((3, 3))
-                    )
-                self.edge_rel[k] = compose_scalar(self.edge_rel[k].tolist(), inv_offset)
+                self._reexpress(k, None, offset)
             kept_adjacency[other] = k
             self.adjacency[other][kept] = k
         moved = [removed, *self._absorbed[removed]]
@@ -438,19 +458,10 @@ class MapGraph:
         b, to_dst = self.resolve(dst)
         if a == b or b in self.adjacency[a]:
             return False
-        from_dst = inverse_scalar(to_dst)
         self.edge_from[k], self.edge_to[k] = a, b
-        self.edge_rel[k] = compose_scalar(compose_scalar(to_src, list(rel)), from_dst)
-        own = np.asarray(cov, dtype=np.float64)
-        if own[0, 0] > 0 and any(to_dst):  # evidence, in its own frame (merge_vertex)
-            own = compose_covariance(own, from_dst, np.zeros((3, 3)))
-        self.edge_cov[k] = own
-        self.edge_alive[k] = True
-        self.adjacency[a][b] = k
-        self.adjacency[b][a] = k
-        self.num_edges += 1
-        if self.edge_kind[k] == EdgeKind.LOOP_CLOSURE:
-            self.num_loop_edges += 1
+        self.edge_rel[k], self.edge_cov[k] = rel, cov
+        self._reexpress(k, to_src if any(to_src) else None, to_dst if any(to_dst) else None)
+        self._attach(k)
         return True
 
     # ------------------------------------------------------------------ state

@@ -381,12 +381,13 @@ class SceneIntegration:
         Return the vertices made live again (:mod:`~cogmap_core.merge_records`). The links
         those merges rested on stay held only where a merge that stands rests on them too.
         """
-        split = [record for record in self.merges if rejected.intersection(record.links)]
-        if not split:
+        resting = [bool(rejected.intersection(record.links)) for record in self.merges]
+        if not any(resting):
             return 0
+        split = [record for record, r in zip(self.merges, resting, strict=True) if r]
+        self.merges = [record for record, r in zip(self.merges, resting, strict=True) if not r]
         self._known = None  # the graph's edges changed
         revived = sum(split_merge(graph, record) for record in reversed(split))
-        self.merges = [record for record in self.merges if not rejected.intersection(record.links)]
         still = {k for record in self.merges for k in record.links}
         for k in {k for record in split for k in record.links} - still:
             graph.edge_held[k] = False

@@ -378,6 +378,25 @@ def test_a_file_from_before_merge_records_loads_with_no_merge_to_split(
     assert same_state(new, old)
 
 
+def test_merge_records_that_do_not_fit_together_are_refused(resumed: Path, tmp_path: Path) -> None:
+    """A file whose merge records lost an entry (one evidence index fewer than records) is
+    refused with one line naming them, not loaded with records that split the wrong merges."""
+    session = resumed / "day1.session.npz"
+    name = "map.scene_integration.merges.evidence"
+    with np.load(session) as data:
+        header = json.loads(str(data["header"]))
+        shorter = data[name][:-1]
+    header["arrays"][name][0] = list(shorter.shape)
+    edited = rewrite_npz(
+        session, tmp_path / "edited.npz", header=json.dumps(header), **{name: shorter}
+    )
+    with pytest.raises(SessionError) as refused:
+        load_session(edited)
+    assert str(refused.value) == (
+        f"{edited}: map.scene_integration.merges records do not fit together"
+    )
+
+
 @pytest.mark.parametrize("counter", ["proposed", "integrated", "refused_relocalisations"])
 def test_counters_that_do_not_add_up_are_refused(
     counter: str, resumed: Path, tmp_path: Path
