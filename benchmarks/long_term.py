@@ -12,13 +12,17 @@ end, the event log, the three maps with their optimisations -- and prints per la
 - the process's resident memory;
 
 then the totals, the size change of each map over laps 3-N (raw and with ground first explored in
-those laps set apart) with its fidelity and ATE -- and the scene-integration map rebuilt with the
-paper's merge (``integration_keeps_evidence`` 0) beside, not timed --, the time to save the
-whole session and to load it again, and the targets. It writes ``long_term.png`` (and
-``long_term.svg``): sizes per map over time (left) and per-lap cost per stage (right).
+those laps set apart) with its fidelity and ATE, each map's optimiser pose blocks over laps 3-N --
+and the scene-integration map rebuilt with the paper's merge (``integration_keeps_evidence`` 0)
+beside, not timed --, the time to save the whole session and to load it again, and the targets.
+It writes ``long_term.png`` (and ``long_term.svg``): sizes per map over time (left) and per-lap
+cost per stage (right).
 
 Targets (issue "Long-term mapping", 60 laps): compact vertices change laps 3-60 within +-3 % and
-completeness / correctness >= 0.98 at lap 60; front end ms per frame lap 60 <= 1.3 x lap 6's;
+completeness / correctness >= 0.98 at lap 60; (issue "Compaction that keeps the evidence") compact
+ATE <= 1.1 x the standard map's, the compact map's optimiser pose blocks (the vertices of its
+latest batch optimisation, printed per map) <= 0.2 x the standard map's at lap 60 and within
++-5 % of lap 3's at every lap from 3 to 60; front end ms per frame lap 60 <= 1.3 x lap 6's;
 compact map ms per frame lap 60 <= 1.3 x lap 6's; whole run >= 50x real time; peak RSS <= 1 GB;
 saving and resuming the session <= 5 s each.
 
@@ -81,6 +85,8 @@ class Lap:
     optimise_s: dict[MapMode, float]
     vertices: dict[MapMode, int]
     edges: dict[MapMode, int]
+    #: pose blocks of each map's latest optimisation so far (0: none yet)
+    pose_blocks: dict[MapMode, int]
     templates: int
     completeness: float
     correctness: float
@@ -197,6 +203,7 @@ def _close_lap(
         optimise_s=optimise,
         vertices={m: session.maps[m].num_vertices for m in MODES},
         edges={m: session.maps[m].num_edges for m in MODES},
+        pose_blocks={m: _pose_blocks(session.maps[m]) for m in MODES},
         templates=session.frontend.template_count,
         completeness=math.nan if fidelity is None else fidelity.completeness,
         correctness=math.nan if fidelity is None else fidelity.correctness,
@@ -204,6 +211,11 @@ def _close_lap(
     )
     run.laps.append(lap)
     print(_lap_line(lap), flush=True)
+
+
+def _pose_blocks(cmap: CognitiveMap) -> int:
+    """Pose blocks (vertices) in a map's latest batch optimisation (0 before the first)."""
+    return cmap.optimizations[-1].vertices if cmap.optimizations else 0
 
 
 def _header() -> str:
@@ -282,8 +294,8 @@ def main() -> int:
     if dead_reckoning is not None:
         print(f"dead-reckoning ATE {dead_reckoning:.3f} m (the baseline of the maps' ATE)")
 
-    def describe(label: str, cmap: CognitiveMap) -> tuple[SizeChange, LayoutFidelity]:
-        """Print one map's size change, fidelity and ATE; return the first two."""
+    def describe(label: str, cmap: CognitiveMap) -> tuple[SizeChange, LayoutFidelity, float | None]:
+        """Print one map's size change, fidelity and ATE; return them."""
         change = log.size_change(cmap, lap_times[first_lap], lap_times[laps], LAYOUT_RADIUS)
         accuracy = log.map_accuracy(cmap.snapshot(), LAYOUT_RADIUS)
         assert change is not None and accuracy is not None
@@ -298,12 +310,13 @@ def main() -> int:
             + ("" if ate is None else f", ATE {ate:.4f} m")
             + f"; {len(cmap.optimizations)} optimisations, {optimise_s:.1f} s"
         )
-        return change, fidelity
+        return change, fidelity, ate
 
     changes = {}
     fidelities = {}
+    ates: dict[MapMode, float | None] = {}
     for mode in MODES:
-        changes[mode], fidelities[mode] = describe(mode.value, run.session.maps[mode])
+        changes[mode], fidelities[mode], ates[mode] = describe(mode.value, run.session.maps[mode])
     merged = MapMode.SCENE_INTEGRATION
     params = run.session.maps[merged].params
     if params.integration_keeps_evidence >= 0.5:  # the paper's merge, beside (not timed)
@@ -314,6 +327,15 @@ def main() -> int:
         f"{run.session_bytes / 1e6:.1f} MB ({run.session.frontend.template_count} templates, "
         f"{log.event_count} events)"
     )
+    blocks = {m: [lap.pose_blocks[m] for lap in run.laps[first_lap - 1 :]] for m in MODES}
+    for mode in MODES:
+        series = blocks[mode]
+        share = series[-1] / max(blocks[MapMode.STANDARD][-1], 1)
+        print(
+            f"  {mode.value:18} optimiser pose blocks: lap {first_lap} {series[0]}, lap {laps} "
+            f"{series[-1]} ({series[-1] / max(series[0], 1) - 1:+.1%}), laps {first_lap}-{laps} "
+            f"{min(series)}-{max(series)}; lap {laps} {share:.3f} x the standard map's"
+        )
     for k in sorted({6, (laps + 1) // 2, 30, laps} & set(range(1, laps + 1))):
         print("  " + _lap_line(run.laps[k - 1]))
     args.out.mkdir(parents=True, exist_ok=True)
@@ -328,6 +350,11 @@ def main() -> int:
     realtime = duration / pipeline_s
     peak = peak_rss_mb()
     change = changes[MapMode.COMPACT]
+    compact_blocks, standard_blocks = blocks[MapMode.COMPACT], blocks[MapMode.STANDARD]
+    blocks_ratio = compact_blocks[-1] / max(standard_blocks[-1], 1)
+    blocks_spread = max(abs(b / max(compact_blocks[0], 1) - 1) for b in compact_blocks)
+    ate_std, ate_cmp = ates[MapMode.STANDARD], ates[MapMode.COMPACT]
+    ate_ratio = math.inf if not ate_std or ate_cmp is None else ate_cmp / ate_std
     checks = [
         (
             f"compact vertices change laps {first_lap}-{laps} within +-3 % (raw "
@@ -338,6 +365,16 @@ def main() -> int:
             f"compact completeness, correctness >= 0.98 at lap {laps} "
             f"({fidelity.completeness:.4f}, {fidelity.correctness:.4f})",
             min(fidelity.completeness, fidelity.correctness) >= 0.98,
+        ),
+        (f"compact ATE <= 1.1 x standard ({ate_ratio:.2f} x)", ate_ratio <= 1.1),
+        (
+            f"compact optimiser pose blocks lap {laps} <= 0.2 x standard's ({blocks_ratio:.3f})",
+            blocks_ratio <= 0.2,
+        ),
+        (
+            f"compact optimiser pose blocks flat laps {first_lap}-{laps}: every lap within +-5 % "
+            f"of lap {first_lap}'s (largest change {blocks_spread:+.1%})",
+            blocks_spread <= 0.05,
         ),
         (f"front end ms/frame lap {laps} <= 1.3 x lap {ref.lap} ({fe_ratio:.2f})", fe_ratio <= 1.3),
         (f"compact ms/frame lap {laps} <= 1.3 x lap {ref.lap} ({cmp_ratio:.2f})", cmp_ratio <= 1.3),
