@@ -154,6 +154,7 @@ def generated_logs(
     folder: Path, quick: bool, seeds: tuple[int, ...] = LOG_SEEDS
 ) -> list[tuple[str, Path]]:
     """The generated logs (written once into ``folder``): six patterns x three seeds."""
+    from cogmap_core.datasets.cache import cache_lock
     from cogmap_core.datasets.log_generator import LogGeneratorConfig, generate_log
     from cogmap_core.datasets.log_routes import PATTERNS
     from cogmap_core.datasets.log_writer import write_log
@@ -164,11 +165,12 @@ def generated_logs(
         for seed, drift, false_share in log_grid(seeds):
             prefix = folder / f"{pattern}_{seed}_{drift}_{false_share:g}"
             path = Path(f"{prefix}_Input.txt")
-            if not path.exists():
-                config = LogGeneratorConfig(
-                    pattern=pattern, seed=seed, drift=drift, false_fraction=false_share
-                )
-                write_log(generate_log(config), prefix, "tuc")
+            with cache_lock(folder):  # a benchmark run beside this one may be writing it
+                if not path.exists():
+                    config = LogGeneratorConfig(
+                        pattern=pattern, seed=seed, drift=drift, false_fraction=false_share
+                    )
+                    write_log(generate_log(config), prefix, "tuc")
             out.append((prefix.name, path))
     return out
 

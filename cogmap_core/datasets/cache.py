@@ -54,7 +54,13 @@ def default_dataset_file() -> Path:
 
 
 @contextlib.contextmanager
-def _locked(folder: Path) -> Iterator[None]:
+def cache_lock(folder: Path) -> Iterator[None]:
+    """Hold the cache folder's lock (``folder/.lock``): one process writes into it at a time.
+
+    Raises:
+        DatasetCacheError: the folder cannot be written.
+
+    """
     lock_path = folder / ".lock"
     try:
         handle = lock_path.open("a")
@@ -105,7 +111,7 @@ def default_dataset_path(
             f"cannot create the dataset cache {folder}: {exc.strerror}; set {CACHE_ENV} to a "
             "writable folder"
         ) from None
-    with _locked(folder):
+    with cache_lock(folder):
         if path.exists() and not regenerate:  # another process made it while we waited
             return path
         for stale in folder.glob(f".{path.name}.partial-*"):
