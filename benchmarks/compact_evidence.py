@@ -18,13 +18,13 @@ edges). Each map reduced in these two ways is built four times on the 12 bags of
   in the frame of the vertex standing for it (from the ground truth at their creation times);
 - ``both``.
 
-Printed per bag: dead reckoning's ATE and the standard map's, then each build's ATE over the
-standard map's and its fidelity (the lower of completeness and correctness at 8 cm); then per
-build the median ratio, how many bags are within 1.1 x and 1.2 x, and the worst. (Measured at
-stop 39: the compact map's kept links make it worse -- median 1.22, worst 2.00 x -- while with
-true offsets they make it better than the standard map on 8 of 12 bags, median 0.82: the
-evidence is in the links, and it can only be used where each experience's place is estimated,
-which is what the compact map's size rules out.)
+Printed per bag: dead reckoning's ATE, the standard map's ATE and vertices, then each build's ATE
+over the standard map's, its fidelity (the lower of completeness and correctness at 8 cm) and its
+vertices; then per build the median ratio, how many bags are within 1.1 x and 1.2 x, and the
+worst. (Measured at stop 39: the compact map's kept links make it worse -- median 1.22, worst
+2.00 x -- while with true offsets they make it better than the standard map on 8 of 12 bags,
+median 0.82: the evidence is in the links, and it can only be used where each experience's
+place is estimated, which is what the compact map's size rules out.)
 
 Usage: ``python benchmarks/compact_evidence.py [--seeds 1,2,3] [--layouts a,b,...]
 [--modes compact,scene_integration]``
@@ -215,13 +215,14 @@ def main() -> None:
     modes = [MapMode(m) for m in args.modes.split(",")]
     ratios: dict[tuple[MapMode, str], list[float]] = {(m, b): [] for m in modes for b in BUILDS}
     print(
-        f"{'layout':18} {'seed':>4} {'DR ATE':>7} {'std ATE':>8} {'map':18} "
-        + " ".join(f"{b + ' (fid)':>20}" for b in BUILDS)
+        f"{'layout':18} {'seed':>4} {'DR ATE':>7} {'std ATE':>8} {'std V':>6} {'map':18} "
+        + " ".join(f"{b + ' (fid, V)':>26}" for b in BUILDS)
     )
     for seed in (int(s) for s in args.seeds.split(",")):
         for layout in args.layouts.split(","):
             log = EventLog.from_recording(load_dataset(layout, seed).recording)
-            standard = log.map_ate(build(MapMode.STANDARD, log, False, False))
+            standard_map = build(MapMode.STANDARD, log, False, False)
+            standard = log.map_ate(standard_map)
             dead_reckoning = log.dead_reckoning_ate()
             assert standard is not None and dead_reckoning is not None
             for mode in modes:
@@ -232,10 +233,10 @@ def main() -> None:
                     assert ate is not None and fidelity is not None
                     ratios[mode, name].append(ate / standard)
                     worst = min(fidelity.completeness, fidelity.correctness)
-                    cells.append(f"{ate / standard:>12.2f} ({worst:.3f})")
+                    cells.append(f"{ate / standard:>12.2f} ({worst:.3f}, {cmap.num_vertices:5d})")
                 print(
-                    f"{layout:18} {seed:4d} {dead_reckoning:7.4f} {standard:8.4f} {mode.value:18} "
-                    + " ".join(cells)
+                    f"{layout:18} {seed:4d} {dead_reckoning:7.4f} {standard:8.4f} "
+                    f"{standard_map.num_vertices:6d} {mode.value:18} " + " ".join(cells)
                 )
     for mode in modes:
         print(f"\n{mode.value}: ATE over the standard map's, per build")

@@ -219,7 +219,7 @@ class CompiledReplay:
         self.cmap = cmap
         self._table = np.full((0, 2), loop._EMPTY, dtype=np.int64)
         self._table_used = 0
-        self._seen: tuple[tuple[int, int], int, int] | None = None  # graph counts, table made
+        self._seen: tuple[int, int, int] | None = None  # graph counts when the table was made
         self._edge_log = np.empty((0, 3), dtype=np.int64)
         self._absorbed_log = np.empty((0, 2), dtype=np.int64)
         self._run_log = np.empty(0, dtype=np.int64)
@@ -291,18 +291,18 @@ class CompiledReplay:
         """Bring the edge table up to date with the graph (rebuilt after merges)."""
         cmap = self.cmap
         g = cmap.graph
-        # vertices merged away, edges removed, and the revision (a merge split also changes it)
-        merged = (g.num_ids - g.num_vertices - cmap.counters.declined, g.revision)
+        # the graph's revision (every merge and every split of one changes it), edges removed
+        revision = g.revision
         removed = g.num_edges_total - g.num_edges
         seen = self._seen
         need = 2 * (g.num_edges + 64)
-        if seen is not None and seen[0] == merged and seen[1] == removed:
+        if seen is not None and seen[0] == revision and seen[1] == removed:
             if 2 * (self._table_used + g.num_edges_total - seen[2] + 64) <= self._table.shape[0]:
                 for e in range(seen[2], g.num_edges_total):  # added by the Python code
                     self._table_used += loop._table_insert(
                         self._table, int(g.edge_from[e]), int(g.edge_to[e]), e
                     )
-                self._seen = (merged, removed, g.num_edges_total)
+                self._seen = (revision, removed, g.num_edges_total)
                 return
         size = 1024
         while size < 2 * need:
@@ -311,7 +311,7 @@ class CompiledReplay:
         self._table_used = loop._build_table(
             self._table, g.edge_from, g.edge_to, g.edge_alive, g.num_edges_total
         )
-        self._seen = (merged, removed, g.num_edges_total)
+        self._seen = (revision, removed, g.num_edges_total)
 
     def _run(
         self,

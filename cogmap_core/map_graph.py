@@ -460,7 +460,7 @@ class MapGraph:
             return False
         self.edge_from[k], self.edge_to[k] = a, b
         self.edge_rel[k], self.edge_cov[k] = rel, cov
-        self._reexpress(k, to_src if any(to_src) else None, to_dst if any(to_dst) else None)
+        self._reexpress(k, to_src, to_dst)
         self._attach(k)
         return True
 
